@@ -1,0 +1,28 @@
+# Fresh-machine entry points: `make demo` (the main job) and `make test` (the test suite).
+# Each installs what it needs into .venv. torch is pinned first, with the exact version,
+# so that pip takes the local CPU wheel instead of pulling several GB of CUDA packages.
+
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.nnfmu-installed
+
+.PHONY: setup demo test clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet -e '.[dev,tune]'
+	touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/nnfmu demo
+
+test: setup
+	$(PY) -m pytest -q
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache demo-output

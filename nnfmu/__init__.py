@@ -1,0 +1,49 @@
+"""nnfmu: neural simulation models of dynamical systems, exported as standalone FMUs.
+
+Public API (names are imported on first use, so ``import nnfmu`` stays light):
+
+- data: :class:`Dataset`, :class:`Channel`, :class:`Trajectories`, :func:`load_dataset`,
+  :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
+- scoring: :func:`nrmse`
+- models: :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
+- the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
+- errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "Dataset": "nnfmu.data",
+    "Channel": "nnfmu.data",
+    "Trajectories": "nnfmu.data",
+    "load_dataset": "nnfmu.data",
+    "save_dataset": "nnfmu.data",
+    "from_arrays": "nnfmu.data",
+    "load_csv": "nnfmu.data",
+    "load_robot_benchmark": "nnfmu.data",
+    "nrmse": "nnfmu.metrics",
+    "NrmseResult": "nnfmu.metrics",
+    "CasadiModel": "nnfmu.system",
+    "SystemSpec": "nnfmu.system",
+    "Variable": "nnfmu.system",
+    "NnfmuError": "nnfmu.errors",
+    "load_model": "nnfmu.models",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'nnfmu' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

@@ -1,0 +1,198 @@
+"""Loaders that turn external formats into a :class:`~nnfmu.data.Dataset`.
+
+- :func:`load_robot_benchmark`: the industrial robot benchmark's official
+  ``.mat`` (Weigand et al. 2022), and the re-cut variant with 605-sample pieces;
+- :func:`load_csv`: CSV files with a header of named columns.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from nnfmu.data.dataset import Channel, Dataset, Trajectories, make_trajectories
+from nnfmu.errors import DataError, DataFileError, ShapeError
+
+ROBOT_TS = 0.1
+ROBOT_INPUTS = tuple(Channel(f"tau{j}", "N.m", f"motor torque of joint {j}") for j in range(1, 7))
+ROBOT_OUTPUTS = tuple(Channel(f"q{j}", "deg", f"angle of joint {j}") for j in range(1, 7))
+RECUT_PIECE = 605
+RECUT_CAVEAT = (
+    "NOT the original benchmark file: a re-cut variant (yifang0-0/Physics-Guided-Recurrent-State-"
+    "Space-Neural-Networks) in 605-sample pieces, with one position and one torque sample dropped "
+    "per 606-sample piece, padded validation tail (trimmed here), and uncertain u/y alignment. "
+    "Scores on it are near, not equal, to official benchmark figures; do not report them as official."
+)
+
+
+def _read_mat(path: Path) -> dict[str, np.ndarray]:
+    """Read a MATLAB file, v5 (scipy) or v7.3 (HDF5, transposed on disk)."""
+    import scipy.io
+
+    if not path.is_file():
+        raise DataFileError(f"{path} not found; give the path of the benchmark's .mat file")
+    try:
+        raw = scipy.io.loadmat(path)
+        return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
+    except NotImplementedError:  # MATLAB v7.3 is HDF5
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return {k: np.asarray(f[k]).T for k in f.keys() if isinstance(f[k], h5py.Dataset)}
+    except (ValueError, OSError, TypeError) as exc:
+        raise DataFileError(f"{path} is not a readable MATLAB .mat file ({exc})") from exc
+
+
+def _channel_major(mat: dict, key: str, path: Path) -> np.ndarray:
+    """Return ``mat[key]`` (6 x N, channel-major) as an array of shape (N, 6)."""
+    arr = mat[key]
+    if arr.ndim != 2 or 6 not in arr.shape:
+        raise ShapeError(f"{path}: array {key!r} has shape {arr.shape}, expected (6, N) channel-major")
+    return np.ascontiguousarray(arr.T if arr.shape[0] == 6 else arr, dtype=np.float64)
+
+
+def load_robot_benchmark(path: str | os.PathLike, *, recut_piece: int = RECUT_PIECE) -> Dataset:
+    """Load the industrial robot benchmark (KUKA KR300 R2500) from its ``.mat`` file.
+
+    Two layouts are recognised:
+
+    - **official** ``forward_identification_without_raw_data.mat``: ``time_train``,
+      ``time_test`` (1, N) in s, ``u_train``, ``u_test`` (6, N) motor torques in
+      N.m and ``y_train``, ``y_test`` (6, N) joint angles in deg. Train and test
+      each become one continuous trajectory; Ts is the median time step. There
+      is no official validation split (use ``Dataset.with_validation``).
+    - **re-cut variant** (``u_train``, ``u_val``, ``u_test``, ... with no time
+      vectors): every split is cut into ``recut_piece``-sample pieces, because
+      a sample was dropped at each piece boundary. The test pieces are joined
+      into one record, as the benchmark scores its test set. Padding at the end
+      of a split (inputs exactly zero on all channels) is trimmed. ``source``
+      records the caveat.
+
+    Returns a dataset with inputs ``tau1..tau6`` [N.m] and outputs ``q1..q6`` [deg].
+    """
+    path = Path(path)
+    mat = _read_mat(path)
+    needed = {"u_train", "y_train", "u_test", "y_test"}
+    if not needed <= set(mat):
+        raise DataFileError(
+            f"{path} lacks {sorted(needed - set(mat))}; expected the benchmark layout with "
+            "u_train, y_train, u_test, y_test (6 x N each)"
+        )
+    arr = {k: _channel_major(mat, k, path) for k in needed | ({"u_val", "y_val"} & set(mat))}
+    for s in ("train", "test", "val"):
+        if f"u_{s}" in arr and len(arr[f"u_{s}"]) != len(arr[f"y_{s}"]):
+            raise ShapeError(f"{path}: u_{s} has {len(arr[f'u_{s}'])} samples but y_{s} has "
+                             f"{len(arr[f'y_{s}'])}")
+    if "time_train" in mat:
+        return _official(path, mat, arr)
+    return _recut(path, arr, recut_piece)
+
+
+def _official(path: Path, mat: dict, arr: dict) -> Dataset:
+    t = np.ravel(mat["time_train"]).astype(float)
+    if len(t) != len(arr["u_train"]):
+        raise ShapeError(f"{path}: time_train has {len(t)} samples but u_train has {len(arr['u_train'])}")
+    dt = np.diff(t)
+    Ts = float(np.median(dt)) if len(dt) else ROBOT_TS
+    splits = {
+        "train": make_trajectories(arr["u_train"], arr["y_train"], "train"),
+        "test": make_trajectories(arr["u_test"], arr["y_test"], "test"),
+    }
+    source = {"kind": "robot-benchmark", "layout": "official", "file": str(path.resolve()),
+              "reference": "Weigand et al. 2022, doi:10.26204/DATA/5"}
+    return Dataset(Ts=Ts, inputs=ROBOT_INPUTS, outputs=ROBOT_OUTPUTS, splits=splits, source=source)
+
+
+def _pieces(u: np.ndarray, y: np.ndarray, piece: int) -> Trajectories:
+    us = [u[i:i + piece] for i in range(0, len(u), piece)]
+    ys = [y[i:i + piece] for i in range(0, len(y), piece)]
+    last = us[-1]
+    pad = 0
+    while pad < len(last) and not last[len(last) - 1 - pad].any():
+        pad += 1
+    if pad:  # zero-torque padding, and the output samples held beside it
+        us[-1], ys[-1] = last[:len(last) - pad - 1], ys[-1][:len(last) - pad - 1]
+    keep = [i for i, a in enumerate(us) if len(a) >= 2]
+    return Trajectories(tuple(us[i] for i in keep), tuple(ys[i] for i in keep))
+
+
+def _recut(path: Path, arr: dict, piece: int) -> Dataset:
+    splits = {"train": _pieces(arr["u_train"], arr["y_train"], piece),
+              "test": _pieces(arr["u_test"], arr["y_test"], piece).concatenated()}
+    if "u_val" in arr:
+        splits["valid"] = _pieces(arr["u_val"], arr["y_val"], piece)
+    source = {"kind": "robot-benchmark", "layout": "recut-605", "file": str(path.resolve()),
+              "caveat": RECUT_CAVEAT, "piece_length": piece,
+              "reference": "Weigand et al. 2022, doi:10.26204/DATA/5"}
+    return Dataset(Ts=ROBOT_TS, inputs=ROBOT_INPUTS, outputs=ROBOT_OUTPUTS, splits=splits, source=source)
+
+
+def load_csv(
+    files: dict[str, Sequence[str | os.PathLike] | str | os.PathLike],
+    *,
+    inputs: Sequence[str],
+    outputs: Sequence[str],
+    Ts: float | None = None,
+    time_column: str | None = None,
+    units: dict[str, str] | None = None,
+) -> Dataset:
+    """Build a dataset from CSV files with a header row of column names.
+
+    ``files`` maps a split name (``train``, ``valid``, ``test``) to one CSV file
+    or a list of them; each file is one trajectory. ``inputs`` and ``outputs``
+    name the columns to use, in order. The sample time is ``Ts`` or, if a
+    ``time_column`` is given, the median step of that column (all files must
+    agree within 1e-6 relative). ``units`` maps column names to units.
+    """
+    units = units or {}
+    splits, steps = {}, []
+    for split, group in files.items():
+        group = [group] if isinstance(group, (str, os.PathLike)) else list(group)
+        us, ys = [], []
+        for file in group:
+            cols = _read_csv_columns(Path(file), list(inputs) + list(outputs) + ([time_column] if time_column else []))
+            us.append(np.column_stack([cols[c] for c in inputs]))
+            ys.append(np.column_stack([cols[c] for c in outputs]))
+            if time_column:
+                steps.append(float(np.median(np.diff(cols[time_column]))))
+        splits[split] = make_trajectories(us, ys, split)
+    if Ts is None:
+        if not steps:
+            raise DataError("give Ts (the sample time in s) or a time_column to read it from")
+        Ts = steps[0]
+        if not np.allclose(steps, Ts, rtol=1e-6):
+            raise DataError(f"CSV files have different sample times {sorted(set(steps))}; resample them first")
+    ins = [Channel(c, units.get(c, "")) for c in inputs]
+    outs = [Channel(c, units.get(c, "")) for c in outputs]
+    source = {"kind": "csv", "files": {k: [str(f) for f in ([v] if isinstance(v, (str, os.PathLike)) else v)]
+                                       for k, v in files.items()}}
+    return Dataset(Ts=float(Ts), inputs=tuple(ins), outputs=tuple(outs), splits=splits, source=source)
+
+
+def _read_csv_columns(file: Path, wanted: list[str]) -> dict[str, np.ndarray]:
+    if not file.is_file():
+        raise DataFileError(f"CSV file {file} not found")
+    with open(file, newline="") as f:
+        reader = csv.reader(f)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise DataFileError(f"{file} is empty; expected a header row of column names") from None
+        missing = [c for c in wanted if c not in header]
+        if missing:
+            raise DataError(f"{file} has no column(s) {missing}; its columns are {header}")
+        idx = [header.index(c) for c in wanted]
+        rows = []
+        for lineno, row in enumerate(reader, start=2):
+            if not row:
+                continue
+            try:
+                rows.append([float(row[i]) for i in idx])
+            except (ValueError, IndexError) as exc:
+                raise DataError(f"{file}, line {lineno}: cannot read a number ({exc})") from exc
+    data = np.array(rows, dtype=np.float64).reshape(-1, len(wanted))
+    return {c: data[:, k] for k, c in enumerate(wanted)}

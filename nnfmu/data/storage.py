@@ -1,0 +1,147 @@
+"""The dataset folder on disk (DESIGN.md, "Dataset on disk").
+
+    DIR/meta.json    Ts, inputs and outputs ({name, unit}), source, split lengths
+    DIR/train.npz    u (n_traj, n_steps, n_u), y (n_traj, n_steps, n_y), lengths (n_traj,)
+    DIR/valid.npz    optional, same layout
+    DIR/test.npz     same layout
+
+Trajectories shorter than the longest are padded with NaN after their last
+sample, and ``lengths`` says where each ends. The loader cuts the padding off,
+so it never reaches statistics, training or scores, and a NaN inside a
+trajectory's own samples is still reported as bad data.
+
+Writing is atomic: the folder is built under a temporary name beside the
+target and renamed into place, so a failure leaves no half-written dataset.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from nnfmu.data.dataset import SPLIT_NAMES, Dataset, Trajectories, _check_split
+from nnfmu.errors import DataError, DataFileError, ShapeError
+
+
+def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write ``ds`` as a dataset folder at ``path`` and return the path.
+
+    An existing folder is replaced only with ``overwrite=True``; the old one
+    stays intact until the new one is complete.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise DataFileError(
+            f"{path} already exists; choose another folder or pass overwrite=True (CLI: --force)"
+        )
+    parent = path.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent))
+    except OSError as exc:
+        raise DataFileError(f"cannot write the dataset folder {path}: {exc.strerror or exc}; "
+                            "choose a writable location") from exc
+    try:
+        for name, tr in ds.splits.items():
+            _write_split(tmp / f"{name}.npz", tr)
+        (tmp / "meta.json").write_text(json.dumps(ds.meta(), indent=2) + "\n")
+        _replace_dir(tmp, path)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise DataFileError(f"cannot write the dataset folder {path}: {exc}") from exc
+        raise
+    return path
+
+
+def _write_split(file: Path, tr: Trajectories) -> None:
+    n_max = int(tr.lengths.max())
+    u = np.full((tr.n_traj, n_max, tr.u[0].shape[1]), np.nan)
+    y = np.full((tr.n_traj, n_max, tr.y[0].shape[1]), np.nan)
+    for i, (ui, yi) in enumerate(zip(tr.u, tr.y)):
+        u[i, :len(ui)] = ui
+        y[i, :len(yi)] = yi
+    with open(file, "wb") as f:
+        np.savez_compressed(f, u=u, y=y, lengths=tr.lengths)
+
+
+def _replace_dir(new: Path, target: Path) -> None:
+    if not target.exists():
+        os.replace(new, target)
+        return
+    old = target.with_name(f".{target.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    os.replace(target, old)
+    try:
+        os.replace(new, target)
+    except OSError:
+        os.replace(old, target)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def load_dataset(path: str | os.PathLike) -> Dataset:
+    """Read a dataset folder written by :func:`save_dataset` (or by hand in that layout)."""
+    path = Path(path)
+    if not path.is_dir():
+        hint = " (it is a file; give the folder that holds meta.json)" if path.exists() else ""
+        raise DataFileError(f"dataset folder {path} not found{hint}; create one with `nnfmu generate` "
+                            "or `nnfmu import`")
+    meta = _read_meta(path / "meta.json")
+    n_u, n_y = len(meta["inputs"]), len(meta["outputs"])
+    splits = {}
+    for name in SPLIT_NAMES:
+        file = path / f"{name}.npz"
+        if file.exists():
+            splits[name] = _read_split(file, n_u, n_y)
+            _check_split(splits[name], name, n_u, n_y, f"{file}: ")
+    if not splits:
+        raise DataFileError(f"{path} holds no split; expected train.npz and test.npz beside meta.json")
+    try:
+        return Dataset(Ts=meta["Ts"], inputs=meta["inputs"], outputs=meta["outputs"],
+                       splits=splits, source=meta.get("source", {}))
+    except (DataError, ShapeError) as exc:
+        raise type(exc)(f"{path}: {exc}") from exc
+
+
+def _read_meta(file: Path) -> dict:
+    try:
+        meta = json.loads(file.read_text())
+    except FileNotFoundError as exc:
+        raise DataFileError(f"{file} not found; a dataset folder needs meta.json") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DataFileError(f"{file} is not valid JSON ({exc}); rewrite it or regenerate the dataset") from exc
+    missing = [k for k in ("Ts", "inputs", "outputs") if k not in meta]
+    if missing:
+        raise DataFileError(f"{file} lacks the key(s) {missing}; it needs Ts, inputs and outputs")
+    return meta
+
+
+def _read_split(file: Path, n_u: int, n_y: int) -> Trajectories:
+    try:
+        with np.load(file, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise DataFileError(f"{file} cannot be read as .npz ({exc}); regenerate or re-import it") from exc
+    for key in ("u", "y"):
+        if key not in arrays:
+            raise DataFileError(f"{file} has no array {key!r} (it has {sorted(arrays)})")
+    u, y = arrays["u"], arrays["y"]
+    for var, arr, n in (("u", u, n_u), ("y", y, n_y)):
+        if arr.ndim != 3 or arr.shape[2] != n:
+            raise ShapeError(f"{file}: array {var!r} has shape {arr.shape}, expected (n_traj, n_steps, {n}) "
+                             f"to match the {n} channels named in meta.json")
+    if u.shape[:2] != y.shape[:2]:
+        raise ShapeError(f"{file}: arrays 'u' {u.shape} and 'y' {y.shape} disagree in (n_traj, n_steps)")
+    lengths = arrays.get("lengths", np.full(u.shape[0], u.shape[1]))
+    if lengths.shape != (u.shape[0],) or (lengths > u.shape[1]).any() or (lengths < 0).any():
+        raise ShapeError(f"{file}: array 'lengths' {lengths.tolist()} does not fit arrays of shape {u.shape}")
+    return Trajectories(tuple(u[i, :n] for i, n in enumerate(lengths)),
+                        tuple(y[i, :n] for i, n in enumerate(lengths)))
+

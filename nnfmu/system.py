@@ -1,0 +1,194 @@
+"""The one model contract every stage meets: a discrete-time ``(init, step)`` pair.
+
+DESIGN.md's "one idea": the networks, the linear baseline, the physics models
+(discretised with a fixed-step RK4) and hybrids all reduce to::
+
+    init(y0, u0)     -> x0                 # (p) optional parameter vector as a 3rd input
+    step(x, u)       -> (x_next, y_next)   # one sample period Ts; y_next is y(t + Ts)
+
+as CasADi Functions with exactly those port names. :class:`CasadiModel` bundles
+the pair with a :class:`SystemSpec` (name, Ts, named and unit-carrying inputs,
+outputs and parameters). The FMU builder takes nothing else, and
+:meth:`CasadiModel.simulate` is the reference free run that FMUs are tested
+against.
+
+Conventions
+-----------
+- No direct feedthrough: ``y(t0) = y0``; ``y[k+1]`` depends on ``u[0..k]``.
+- ``simulate(u, y0)`` returns ``N`` rows for ``N`` input rows; ``u[N-1]`` is
+  not used (it would only influence ``y[N]``).
+- Everything is in physical units; normalisation lives inside the functions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from nnfmu.errors import ShapeError
+
+INIT_PORTS = (("y0", "u0"), ("x0",))
+STEP_PORTS = (("x", "u"), ("x_next", "y_next"))
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A named scalar of an exported model: an input, output or parameter.
+
+    ``name`` must be a C identifier; ``start`` is the default value of a
+    parameter (ignored for inputs and outputs).
+    """
+
+    name: str
+    unit: str = ""
+    description: str = ""
+    start: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.name.isidentifier():
+            raise ShapeError(f"variable name {self.name!r} is not a C identifier; use letters, digits, '_'")
+
+
+def _as_variable(v) -> Variable:
+    if isinstance(v, Variable):
+        return v
+    if hasattr(v, "name") and hasattr(v, "unit"):  # nnfmu.data.Channel
+        return Variable(v.name, v.unit, getattr(v, "description", ""))
+    if isinstance(v, str):
+        return Variable(v)
+    if isinstance(v, dict):
+        return Variable(**v)
+    raise ShapeError(f"expected a Variable, a Channel, a name or a dict, got {v!r}")
+
+
+@dataclass(frozen=True)
+class SystemSpec:
+    """What an exported model is: its name, sample time and named variables.
+
+    Attributes
+    ----------
+    name : str
+        Model name; a C identifier (it becomes the FMU's modelIdentifier).
+    Ts : float
+        Sample time in seconds.
+    inputs, outputs : tuple of Variable
+        ``n_u`` inputs and ``n_y`` outputs, in the order of the ``u`` and ``y`` ports.
+    parameters : tuple of Variable
+        ``n_p`` tunable parameters fed to the optional ``p`` port, with default ``start`` values.
+    description : str
+        One line for humans (the FMU's description).
+    source : dict
+        Provenance (checkpoint, dataset, training figures), JSON-serialisable.
+    """
+
+    name: str
+    Ts: float
+    inputs: tuple[Variable, ...]
+    outputs: tuple[Variable, ...]
+    parameters: tuple[Variable, ...] = ()
+    description: str = ""
+    source: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for attr in ("inputs", "outputs", "parameters"):
+            object.__setattr__(self, attr, tuple(_as_variable(v) for v in getattr(self, attr)))
+        if not self.name.isidentifier():
+            raise ShapeError(f"model name {self.name!r} is not a C identifier; use letters, digits, '_'")
+        if not (np.isfinite(self.Ts) and self.Ts > 0):
+            raise ShapeError(f"sample time Ts must be positive seconds, got {self.Ts!r}")
+        names = [v.name for v in self.inputs + self.outputs + self.parameters]
+        names += [f"{v.name}_start" for v in self.outputs]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ShapeError(f"variable names must be unique (outputs also claim '<name>_start'); repeated: {dup}")
+
+    @property
+    def n_u(self) -> int:
+        return len(self.inputs)
+
+    @property
+    def n_y(self) -> int:
+        return len(self.outputs)
+
+    @property
+    def n_p(self) -> int:
+        return len(self.parameters)
+
+
+@dataclass(frozen=True)
+class CasadiModel:
+    """An ``(init, step)`` pair of CasADi Functions plus its :class:`SystemSpec`.
+
+    ``init(y0[n_y], u0[n_u](, p[n_p])) -> x0[n_x]`` and
+    ``step(x[n_x], u[n_u](, p[n_p])) -> (x_next[n_x], y_next[n_y])``, all dense
+    column vectors. The ``p`` port exists on both or on neither, iff the spec
+    has parameters.
+    """
+
+    init: ca.Function
+    step: ca.Function
+    spec: SystemSpec
+
+    def __post_init__(self) -> None:
+        check_pair(self.init, self.step, self.spec)
+
+    @property
+    def n_x(self) -> int:
+        return self.step.size1_in(0)
+
+    def parameter_values(self, p: Sequence[float] | None = None) -> np.ndarray:
+        """Parameter vector ``(n_p,)``: ``p`` if given, else the spec's start values."""
+        if p is None:
+            return np.array([v.start for v in self.spec.parameters], dtype=float)
+        p = np.asarray(p, dtype=float).ravel()
+        if p.shape != (self.spec.n_p,):
+            raise ShapeError(f"p has {p.size} values, expected {self.spec.n_p} ({[v.name for v in self.spec.parameters]})")
+        return p
+
+    def simulate(self, u, y0, p: Sequence[float] | None = None) -> np.ndarray:
+        """Free run: ``u`` (N, n_u) and ``y0`` (n_y,) in physical units -> y (N, n_y), y[0] = y0.
+
+        Uses ``step.mapaccum`` so that the loop runs inside CasADi, in float64.
+        """
+        u = np.asarray(u, dtype=float)
+        y0 = np.asarray(y0, dtype=float).ravel()
+        if u.ndim != 2 or u.shape[1] != self.spec.n_u:
+            raise ShapeError(f"u has shape {u.shape}, expected (n_steps, {self.spec.n_u})")
+        if y0.shape != (self.spec.n_y,):
+            raise ShapeError(f"y0 has shape {y0.shape}, expected ({self.spec.n_y},)")
+        extra = [self.parameter_values(p)] if self.spec.n_p else []
+        x0 = self.init(y0, u[0], *extra)
+        n = u.shape[0]
+        if n == 1:
+            return y0[None, :].copy()
+        sim = self.step.mapaccum("simulate", n - 1, [0], [0])
+        _, ys = sim(x0, u[:n - 1].T, *(np.repeat(e[:, None], n - 1, axis=1) for e in extra))
+        return np.vstack([y0[None, :], np.asarray(ys).T])
+
+
+def check_pair(init: ca.Function, step: ca.Function, spec: SystemSpec) -> None:
+    """Check port names and sizes of an ``(init, step)`` pair against ``spec``; raise ShapeError."""
+    with_p = spec.n_p > 0
+    want_init = (["y0", "u0"] + (["p"] if with_p else []), ["x0"])
+    want_step = (["x", "u"] + (["p"] if with_p else []), ["x_next", "y_next"])
+    for fn, (ins, outs) in ((init, want_init), (step, want_step)):
+        if fn.name_in() != ins or fn.name_out() != outs:
+            raise ShapeError(
+                f"CasADi Function {fn.name()!r} has ports {fn.name_in()} -> {fn.name_out()}, "
+                f"expected {ins} -> {outs}; name the ports when creating the Function"
+            )
+    n_x = step.size1_in(0)
+    sizes = {
+        "init y0": (init.size_in(0), spec.n_y), "init u0": (init.size_in(1), spec.n_u),
+        "init x0": (init.size_out(0), n_x), "step u": (step.size_in(1), spec.n_u),
+        "step x_next": (step.size_out(0), n_x), "step y_next": (step.size_out(1), spec.n_y),
+    }
+    if with_p:
+        sizes["init p"] = (init.size_in(2), spec.n_p)
+        sizes["step p"] = (step.size_in(2), spec.n_p)
+    for what, (got, n) in sizes.items():
+        if tuple(got) != (n, 1):
+            raise ShapeError(f"{what} has shape {tuple(got)}, expected ({n}, 1) for the spec {spec.name!r}")

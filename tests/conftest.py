@@ -1,0 +1,21 @@
+"""Shared fixtures. Generated data are made once per test session and never written to the repo."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def valve_small():
+    """The small generated valve dataset (``nnfmu generate valve --size small --seed 0``)."""
+    from nnfmu.physics import generate_dataset
+
+    return generate_dataset("valve", size="small", seed=0)
+
+
+@pytest.fixture(scope="session")
+def valve_small_dir(valve_small, tmp_path_factory):
+    """``valve_small`` saved as a dataset folder; returns its path."""
+    from nnfmu.data import save_dataset
+
+    return save_dataset(valve_small, tmp_path_factory.mktemp("data") / "valve_small")
