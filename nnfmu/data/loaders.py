@@ -43,7 +43,7 @@ def _read_mat(path: Path) -> dict[str, np.ndarray]:
 
         with h5py.File(path, "r") as f:
             return {k: np.asarray(f[k]).T for k in f.keys() if isinstance(f[k], h5py.Dataset)}
-    except (ValueError, OSError, TypeError) as exc:
+    except (ValueError, OSError, TypeError, scipy.io.matlab.MatReadError) as exc:
         raise DataFileError(f"{path} is not a readable MATLAB .mat file ({exc})") from exc
 
 
