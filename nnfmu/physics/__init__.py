@@ -1,0 +1,41 @@
+"""Physics reference models (CasADi SX ODEs), their RK4 discretisation and data generation.
+
+- :class:`PhysicsSystem`: a continuous-time model with named variables; ``.model()`` gives the
+  RK4-discretised ``(init, step)`` pair (:class:`nnfmu.system.CasadiModel`).
+- :func:`valve_system` / :class:`ValveParams`: the two-stage pneumatic valve.
+- :func:`arm_system` / :class:`ArmParams`: the KUKA KR300 arm (RNEA in :mod:`nnfmu.physics.arm_dynamics`).
+- :func:`rk4_step`, :func:`rk4_function`: the fixed-step RK4 used everywhere.
+- :func:`generate_dataset`: simulated datasets (``nnfmu generate``).
+"""
+
+from nnfmu.physics.arm import ARM_F_B_CAP, ARM_N_SUB, ArmParams, arm_system
+from nnfmu.physics.arm_dynamics import bias_torque, forward_dynamics, kinetic_energy, mass_matrix, rnea
+from nnfmu.physics.base import PhysicsSystem, parameter_variables, params_to_json, unpack_parameters
+from nnfmu.physics.compiled import compile_function
+from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
+from nnfmu.physics.rk4 import rk4_function, rk4_step
+from nnfmu.physics.valve import ValveParams, valve_system
+
+__all__ = [
+    "ARM_F_B_CAP",
+    "ARM_N_SUB",
+    "ArmParams",
+    "DATASET_SIZES",
+    "PhysicsSystem",
+    "ValveParams",
+    "arm_system",
+    "bias_torque",
+    "compile_function",
+    "forward_dynamics",
+    "check_request",
+    "generate_dataset",
+    "kinetic_energy",
+    "mass_matrix",
+    "parameter_variables",
+    "params_to_json",
+    "rk4_function",
+    "rk4_step",
+    "rnea",
+    "unpack_parameters",
+    "valve_system",
+]
