@@ -6,6 +6,7 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
   :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
 - scoring: :func:`nrmse`
 - models: :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
+- physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`; :func:`sx_to_torch`
 - the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
 - errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
 """
@@ -32,6 +33,10 @@ _LAZY = {
     "Variable": "nnfmu.system",
     "NnfmuError": "nnfmu.errors",
     "load_model": "nnfmu.models",
+    "generate_dataset": "nnfmu.physics",
+    "valve_system": "nnfmu.physics",
+    "arm_system": "nnfmu.physics",
+    "sx_to_torch": "nnfmu.hybrid",
 }
 
 __all__ = sorted(_LAZY)
