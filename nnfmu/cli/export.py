@@ -1,0 +1,69 @@
+"""``nnfmu export CHECKPOINT -o MODEL.fmu``: a trained network as a standalone FMU.
+
+The same command is ``python -m nnfmu.export CHECKPOINT -o MODEL.fmu`` (see
+:mod:`nnfmu.export.__main__`); both share :func:`add_arguments` and :func:`export_checkpoint`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("checkpoint", help="a checkpoint written by 'nnfmu train' (.pt)")
+    parser.add_argument("-o", "--out", help="the .fmu file to write (default: the checkpoint's name with .fmu)")
+    add_fmu_options(parser)
+    parser.add_argument("--name", help="the FMU's model name and modelIdentifier (a C identifier; default: "
+                                       "the name stored in the checkpoint)")
+
+
+def add_fmu_options(parser: argparse.ArgumentParser) -> None:
+    """Options every FMU-writing command shares."""
+    parser.add_argument("--fmi-version", type=int, choices=[2, 3], default=2,
+                        help="FMI 2.0 (default, read by every importer) or 3.0 co-simulation")
+    parser.add_argument("--target-isa", metavar="ISA",
+                        help="compile the binary for this -march (e.g. x86-64-v3, native); default: portable, "
+                             "with AVX2 chosen at load time where the CPU has it")
+
+
+def build_options(args: argparse.Namespace):
+    from nnfmu.export.fmu import BuildOptions
+
+    return BuildOptions(target_isa=args.target_isa)
+
+
+def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
+    """Build ``model`` into ``out`` with the command-line options and print one summary line."""
+    from nnfmu.export import build_fmu
+
+    t0 = time.perf_counter()
+    path = build_fmu(model, out, fmi_version=args.fmi_version, options=build_options(args))
+    spec = model.spec
+    print(f"wrote {path} (FMI {args.fmi_version}.0 co-simulation, model {spec.name!r}, {spec.n_u} inputs, "
+          f"{spec.n_y} outputs, {spec.n_p} parameters, Ts = {spec.Ts:g} s) in {time.perf_counter() - t0:.1f} s")
+    return path
+
+
+def export_checkpoint(args: argparse.Namespace) -> int:
+    import re
+
+    from nnfmu.errors import ConfigError
+    from nnfmu.models import load_model
+
+    if args.name is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", args.name):
+        raise ConfigError(f"--name must be an ASCII C identifier (letters, digits, '_'), got {args.name!r}")
+    network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
+    from nnfmu.export.to_casadi import casadi_model
+
+    model = casadi_model(network, name=args.name)
+    out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
+    write_fmu(model, out, args)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("export", help="export a trained network as an FMU (same as python -m nnfmu.export)")
+    add_arguments(p)
+    p.set_defaults(func=export_checkpoint)

@@ -1,0 +1,30 @@
+"""Export: trained networks to CasADi, and any CasADi ``(init, step)`` model to a standalone FMU.
+
+- :func:`to_casadi` (torch network -> ``(init, step)`` CasADi Functions) and
+  :func:`casadi_model` (the same, bundled with its :class:`nnfmu.system.SystemSpec`);
+- :func:`build_fmu` (any :class:`nnfmu.system.CasadiModel` -> ``.fmu``, FMI 2.0 or 3.0 co-simulation).
+
+``python -m nnfmu.export model.pt -o model.fmu`` is the command line.
+Names are imported on first use so that ``import nnfmu.export`` does not import torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "to_casadi": "nnfmu.export.to_casadi",
+    "casadi_model": "nnfmu.export.to_casadi",
+    "build_fmu": "nnfmu.export.fmu",
+    "BuildOptions": "nnfmu.export.fmu",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'nnfmu.export' has no attribute {name!r}")

@@ -1,0 +1,200 @@
+"""The one FMU builder: any :class:`nnfmu.system.CasadiModel` -> a standalone-C co-simulation FMU.
+
+The FMU holds CasADi-generated C for ``init`` and ``step`` (``model_casadi.c``)
+and nnfmu's hand-written FMI wrapper (``templates/``: one shared core, FMI 2.0
+and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
+e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
+compiled with the system C compiler. No Python, no libtorch inside.
+
+Behaviour of the FMU (details in ``templates/nnfmu_core.h``):
+
+- variables: the spec's inputs and outputs (names, units, descriptions), a
+  fixed parameter ``<y>_start`` per output (the initial output y0, start = the
+  output Variable's ``start``), the spec's parameters as tunable parameters
+  (they feed the ``p`` port at every sample), ``Ts`` as a constant, and
+  ``DefaultExperiment stepSize = Ts``;
+- the output at the start time is y0; the state ``x0 = init(y0, u0, p)`` is
+  computed at the first ``doStep`` from the ``<y>_start`` values and the
+  inputs set for that step (fmpy and most importers set inputs right before
+  each step, so u0 is exactly the first sample's input);
+- ``doStep(t, h)`` advances ``h / Ts`` samples with the inputs held; any other
+  ``h`` (relative tolerance 1e-9) is an error whose log message names Ts;
+- NaN or infinite inputs or results give an error status and a log message,
+  and the step is not taken; reset, FMU-state get/set/serialize and several
+  instances side by side work.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import uuid
+import zipfile
+from dataclasses import dataclass
+from importlib import resources
+from os import PathLike
+from pathlib import Path
+
+from nnfmu.errors import ConfigError, FmuBuildError
+from nnfmu.export import codegen, compiler, model_description
+from nnfmu.export.compiler import DEFAULT_FLAGS
+from nnfmu.system import CasadiModel
+
+TEMPLATES = ("nnfmu_core.h", "nnfmu_core.c")
+WRAPPER = {2: ("nnfmu_fmi2.c",), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
+
+
+@dataclass(frozen=True, kw_only=True)
+class BuildOptions:
+    """How the FMU's binary is compiled.
+
+    Attributes
+    ----------
+    compiler : str or None
+        C compiler command; default ``$CC``, else cc, gcc or clang on PATH.
+    target_isa : str or None
+        ``-march`` value for the whole binary, e.g. ``"x86-64-v3"`` or ``"native"``.
+        Default None: the compiler's portable baseline, with the model functions
+        dispatched at load time to an AVX2 clone where the CPU has one (x86-64
+        Linux), which is nearly as fast and runs on any x86-64 machine.
+    flags : tuple of str
+        Compiler flags before ``-march``; see :data:`nnfmu.export.compiler.DEFAULT_FLAGS`.
+    speed_patch : bool
+        Rewrite CasADi's dense matrix-product kernel so that it vectorises (bit-identical
+        results; see :mod:`nnfmu.export.codegen`). False keeps CasADi's code as generated,
+        for comparison only.
+    """
+
+    compiler: str | None = None
+    target_isa: str | None = None
+    flags: tuple[str, ...] = DEFAULT_FLAGS
+    speed_patch: bool = True
+
+    def __post_init__(self) -> None:
+        if isinstance(self.flags, str) or not all(isinstance(f, str) for f in self.flags):
+            raise ConfigError(f"BuildOptions.flags must be a sequence of strings, got {self.flags!r}")
+        object.__setattr__(self, "flags", tuple(self.flags))
+
+    def compile_flags(self) -> list[str]:
+        return [*self.flags, *([f"-march={self.target_isa}"] if self.target_isa else [])]
+
+
+def platform_folder(fmi_version: int) -> str:
+    """``binaries/<folder>`` for this machine: FMI 2 names (linux64, ...) or FMI 3 platform tuples."""
+    machine = platform.machine().lower()
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
+    system = {"linux": "linux", "darwin": "darwin", "win32": "windows"}.get(sys.platform)
+    if system is None:
+        raise FmuBuildError(f"building FMUs on {sys.platform!r} is not supported; use Linux, macOS or Windows")
+    if fmi_version == 3:
+        return f"{arch}-{system}"
+    bits = "64" if arch in ("x86_64", "aarch64") else "32"
+    return {"linux": "linux", "darwin": "darwin", "windows": "win"}[system] + bits
+
+
+def fmi_header_dir() -> Path:
+    """fmpy ships the official FMI 2 and 3 headers; the FMU's sources carry copies of them."""
+    import fmpy
+
+    return Path(fmpy.__file__).parent / "c-code"
+
+
+def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_patch: bool):
+    """Generate and copy every C file into ``sources``; return the description and the C files to compile."""
+    sources.mkdir(parents=True)
+    prefix = codegen.symbol_prefix(model)
+    code = codegen.generate_c(model, sources, prefix, speed_patch=speed_patch)
+    templates = resources.files("nnfmu.export") / "templates"
+    for name in (*TEMPLATES, *WRAPPER[fmi_version]):
+        (sources / name).write_text((templates / name).read_text(encoding="utf-8"), encoding="utf-8")
+    for name in FMI_HEADERS[fmi_version]:
+        shutil.copyfile(fmi_header_dir() / name, sources / name)
+    token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
+    stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    desc = model_description.describe(model.spec, token, stamp)
+    header = model_description.render_c_header(desc, code.n_x, code.entry_points)
+    (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
+    c_files = [code.c_file, "nnfmu_core.c", *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
+    return desc, c_files
+
+
+def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions) -> None:
+    desc, c_files = _write_sources(model, fmi_version, root / "sources", options.speed_patch)
+    if fmi_version == 2:
+        xml = model_description.render_fmi2(desc, c_files)
+    else:
+        xml = model_description.render_fmi3(desc)
+        (root / "sources" / "buildDescription.xml").write_text(
+            model_description.render_build_description(desc, c_files), encoding="utf-8")
+    (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
+    binary = root / "binaries" / platform_folder(fmi_version) / (
+        desc.model_identifier + compiler.shared_library_suffix())
+    compiler.compile_shared_library(
+        [root / "sources" / f for f in c_files], binary, include_dirs=[root / "sources"],
+        flags=options.compile_flags(), compiler=options.compiler,
+        what=f"compiling the FMU binary of {model.spec.name!r}")
+
+
+def _zip_tree(root: Path, archive: Path) -> None:
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path in sorted(root.rglob("*")):
+            if path.is_file():
+                zf.write(path, path.relative_to(root).as_posix())
+
+
+def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
+              options: BuildOptions | None = None) -> Path:
+    """Write ``model`` as a co-simulation FMU to ``out`` and return its path.
+
+    Parameters
+    ----------
+    model : CasadiModel
+        ``init(y0[n_y], u0[n_u](, p[n_p])) -> x0`` and ``step(x, u(, p)) -> (x_next, y_next)``
+        with its :class:`nnfmu.system.SystemSpec` (name = modelIdentifier, Ts in s, variables).
+    out : path
+        The ``.fmu`` file to write. It is written to a temporary file next to it and renamed,
+        so a failed build leaves nothing at ``out`` (and an existing file untouched).
+    fmi_version : {2, 3}
+        FMI 2.0 (default: every importer reads it) or FMI 3.0 co-simulation.
+    options : BuildOptions, optional
+        Compiler, flags and target instruction set.
+
+    Raises
+    ------
+    FmuBuildError
+        CasADi cannot generate C, no compiler is found, or compiling fails (with the compiler's stderr).
+    ConfigError
+        ``fmi_version`` is not 2 or 3.
+    """
+    if not isinstance(model, CasadiModel):
+        raise TypeError(f"build_fmu expects an nnfmu.system.CasadiModel, got {type(model).__name__}; "
+                        f"wrap your (init, step) Functions as CasadiModel(init, step, spec)")
+    if fmi_version not in WRAPPER:
+        raise ConfigError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    options = options or BuildOptions()
+    model_description.check_spec(model.spec)
+    out = Path(out)
+    if out.suffix.lower() != ".fmu":
+        raise ConfigError(f"the output file must end in .fmu, got {str(out)!r}; e.g. {out.stem}.fmu")
+    if out.is_dir():
+        raise FmuBuildError(f"{str(out)!r} is a folder; pass the path of the .fmu file to write")
+    if not out.parent.is_dir():
+        raise FmuBuildError(f"the folder {str(out.parent)!r} for the FMU does not exist; create it first")
+    with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
+        _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options)
+        fd, partial = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent)
+        os.close(fd)
+        try:
+            _zip_tree(Path(tmp) / "fmu", Path(partial))
+            os.replace(partial, out)
+        except BaseException:
+            Path(partial).unlink(missing_ok=True)
+            raise
+    return out

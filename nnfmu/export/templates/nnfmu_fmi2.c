@@ -1,0 +1,248 @@
+/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
+ * Only Real variables exist; the other types accept empty requests and reject the rest. */
+#include <stddef.h>
+#include <stdlib.h>
+
+#include "fmi2Functions.h"
+#include "nnfmu_core.h"
+
+/* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
+typedef struct {
+  fmi2CallbackLogger logger;
+  fmi2ComponentEnvironment environment;
+} logger_env;
+
+typedef struct {
+  logger_env le;
+  nnfmu_instance *core;
+} fmi2_instance;
+
+#define INSTANCE (((fmi2_instance *)c)->core)
+#define CHECK_INSTANCE() if (!c) return fmi2Error
+
+/* The core hands over finished messages; FMI 2 loggers read them as printf formats (the core removed
+ * every '%'), so the message itself is the format. */
+static void fmi2_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
+                      const char *message) {
+  const logger_env *le = (const logger_env *)env;
+  le->logger(le->environment, instance_name, (fmi2Status)status, category, message);
+}
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+  fmi2_instance *inst;
+  logger_env le;
+  (void)fmuResourceLocation;
+  (void)visible;
+  le.logger = functions ? functions->logger : NULL;
+  le.environment = functions ? functions->componentEnvironment : NULL;
+  if (fmuType != fmi2CoSimulation) {
+    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName,
+                    "fmi2Instantiate: this FMU supports co-simulation only (fmuType = fmi2CoSimulation)");
+    return NULL;
+  }
+  inst = (fmi2_instance *)calloc(1, sizeof *inst);
+  if (!inst) return NULL;
+  inst->le = le;
+  inst->core = nnfmu_instantiate(instanceName, fmuGUID, le.logger ? fmi2_sink : NULL, &inst->le, loggingOn);
+  if (!inst->core) {
+    free(inst);
+    return NULL;
+  }
+  return inst;
+}
+
+void fmi2FreeInstance(fmi2Component c) {
+  if (!c) return;
+  nnfmu_free(INSTANCE);
+  free(c);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+  (void)nCategories;
+  (void)categories;
+  CHECK_INSTANCE();
+  nnfmu_set_logging(INSTANCE, loggingOn);
+  return fmi2OK;
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+  (void)toleranceDefined;
+  (void)tolerance;
+  (void)stopTimeDefined;
+  (void)stopTime;
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_set_start_time(INSTANCE, "fmi2SetupExperiment", startTime);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_enter_initialization(INSTANCE, "fmi2EnterInitializationMode");
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_exit_initialization(INSTANCE, "fmi2ExitInitializationMode");
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_terminate(INSTANCE, "fmi2Terminate");
+}
+
+fmi2Status fmi2Reset(fmi2Component c) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_reset(INSTANCE);
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_get(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
+}
+
+/* Integer, Boolean and String: this FMU has none. */
+static fmi2Status no_such_type(fmi2Component c, const char *caller, size_t nvr) {
+  CHECK_INSTANCE();
+  if (nvr == 0) return fmi2OK;
+  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s: this FMU has Real variables only", caller);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2GetInteger", nvr);
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2GetBoolean", nvr);
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2GetString", nvr);
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2SetInteger", nvr);
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2SetBoolean", nvr);
+}
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+  (void)vr; (void)value;
+  return no_such_type(c, "fmi2SetString", nvr);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_get_state(INSTANCE, FMUstate);
+}
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_set_state(INSTANCE, FMUstate);
+}
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
+  (void)c;
+  nnfmu_free_state(FMUstate);
+  return fmi2OK;
+}
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
+  (void)FMUstate;
+  CHECK_INSTANCE();
+  *size = nnfmu_serialized_size();
+  return fmi2OK;
+}
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_serialize(INSTANCE, FMUstate, (unsigned char *)serializedState, size);
+}
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_deserialize(INSTANCE, (const unsigned char *)serializedState, size, FMUstate);
+}
+
+static fmi2Status unsupported(fmi2Component c, const char *caller, const char *why) {
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
+  (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+  return unsupported(c, "fmi2GetDirectionalDerivative", "providesDirectionalDerivative is false");
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+  (void)vr; (void)nvr; (void)order; (void)value;
+  return unsupported(c, "fmi2SetRealInputDerivatives", "inputs are held over each sample (canInterpolateInputs "
+                     "is false)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[]) {
+  (void)vr; (void)nvr; (void)order; (void)value;
+  return unsupported(c, "fmi2GetRealOutputDerivatives", "outputs are piecewise constant (maxOutputDerivativeOrder "
+                     "is 0)");
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+  (void)noSetFMUStatePriorToCurrentPoint;
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_do_step(INSTANCE, "fmi2DoStep", currentCommunicationPoint, communicationStepSize);
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) {
+  return unsupported(c, "fmi2CancelStep", "doStep always completes before it returns");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
+  (void)s;
+  (void)value;
+  return unsupported(c, "fmi2GetStatus", "doStep is never asynchronous");
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
+  CHECK_INSTANCE();
+  if (s != fmi2LastSuccessfulTime) return unsupported(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime exists");
+  *value = nnfmu_time(INSTANCE);
+  return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
+  (void)s;
+  (void)value;
+  return unsupported(c, "fmi2GetIntegerStatus", "there is no integer status");
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
+  CHECK_INSTANCE();
+  if (s != fmi2Terminated) return unsupported(c, "fmi2GetBooleanStatus", "only fmi2Terminated exists");
+  *value = fmi2False; /* the FMU never asks to end the simulation */
+  return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
+  (void)s;
+  (void)value;
+  return unsupported(c, "fmi2GetStringStatus", "doStep is never asynchronous");
+}

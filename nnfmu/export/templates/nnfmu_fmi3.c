@@ -1,0 +1,271 @@
+/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
+ * Only Float64 variables exist, there is no event mode and no model exchange. Every FMI 3 function is
+ * exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
+#include <stddef.h>
+#include <stdlib.h>
+
+#include "nnfmu_fmi3.h"
+
+static void fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
+                      const char *message) {
+  const logger_env *le = (const logger_env *)env;
+  (void)instance_name;
+  le->log_message(le->environment, (fmi3Status)status, category, message);
+}
+
+fmi3Status nnfmu_fmi3_unsupported(fmi3Instance instance, const char *caller, const char *why) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+}
+
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                               const fmi3String categories[]) {
+  (void)nCategories; (void)categories;
+  CHECK_INSTANCE();
+  nnfmu_set_logging(INSTANCE, loggingOn);
+  return fmi3OK;
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate) {
+  fmi3_instance *inst;
+  logger_env le;
+  (void)resourcePath; (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
+  (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
+  le.log_message = logMessage;
+  le.environment = instanceEnvironment;
+  if (eventModeUsed) {
+    nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateCoSimulation: "
+                    "eventModeUsed must be false (hasEventMode is false) but was true");
+    return NULL;
+  }
+  inst = (fmi3_instance *)calloc(1, sizeof *inst);
+  if (!inst) return NULL;
+  inst->le = le;
+  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? fmi3_sink : NULL, &inst->le,
+                                 loggingOn);
+  if (!inst->core) {
+    free(inst);
+    return NULL;
+  }
+  return inst;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+  logger_env le;
+  (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+  le.log_message = logMessage;
+  le.environment = instanceEnvironment;
+  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
+  return NULL;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible,
+                                               fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+  logger_env le;
+  (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn; (void)clockUpdate;
+  (void)lockPreemption; (void)unlockPreemption;
+  le.log_message = logMessage;
+  le.environment = instanceEnvironment;
+  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
+  return NULL;
+}
+
+void fmi3FreeInstance(fmi3Instance instance) {
+  if (!instance) return;
+  nnfmu_free(INSTANCE);
+  free(instance);
+}
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
+                                       fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
+  const char *caller = "fmi3EnterInitializationMode";
+  (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+  CHECK_INSTANCE();
+  if (nnfmu_set_start_time(INSTANCE, caller, startTime) != NNFMU_OK) return fmi3Error;
+  return (fmi3Status)nnfmu_enter_initialization(INSTANCE, caller);
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_exit_initialization(INSTANCE, "fmi3ExitInitializationMode");
+}
+
+fmi3Status fmi3Terminate(fmi3Instance instance) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_terminate(INSTANCE, "fmi3Terminate");
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_reset(INSTANCE);
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Float64 values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (nValues != nValueReferences)
+    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetFloat64: expected nValues = nValueReferences "
+                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
+                                 (unsigned long)nValues);
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_get(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
+  return fmi3OK;
+}
+
+fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Float64 values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (nValues != nValueReferences)
+    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3SetFloat64: expected nValues = nValueReferences "
+                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
+                                 (unsigned long)nValues);
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_set(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+  return fmi3OK;
+}
+
+/* Getters and setters of the types this FMU does not have: fine when empty, an error otherwise. */
+#define NO_VARIABLES_OF_TYPE(function, value_type)                                                          \
+  fmi3Status function(fmi3Instance instance, const fmi3ValueReference valueReferences[],                  \
+                      size_t nValueReferences, value_type values[], size_t nValues) {                     \
+    (void)valueReferences; (void)values; (void)nValues;                                                   \
+    CHECK_INSTANCE();                                                                                     \
+    return nValueReferences ? nnfmu_fmi3_unsupported(instance, #function, NO_TYPE) : fmi3OK;                         \
+  }
+NO_VARIABLES_OF_TYPE(fmi3GetFloat32, fmi3Float32)
+NO_VARIABLES_OF_TYPE(fmi3GetInt8, fmi3Int8)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt8, fmi3UInt8)
+NO_VARIABLES_OF_TYPE(fmi3GetInt16, fmi3Int16)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt16, fmi3UInt16)
+NO_VARIABLES_OF_TYPE(fmi3GetInt32, fmi3Int32)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt32, fmi3UInt32)
+NO_VARIABLES_OF_TYPE(fmi3GetInt64, fmi3Int64)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt64, fmi3UInt64)
+NO_VARIABLES_OF_TYPE(fmi3GetBoolean, fmi3Boolean)
+NO_VARIABLES_OF_TYPE(fmi3GetString, fmi3String)
+NO_VARIABLES_OF_TYPE(fmi3SetFloat32, const fmi3Float32)
+NO_VARIABLES_OF_TYPE(fmi3SetInt8, const fmi3Int8)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt8, const fmi3UInt8)
+NO_VARIABLES_OF_TYPE(fmi3SetInt16, const fmi3Int16)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt16, const fmi3UInt16)
+NO_VARIABLES_OF_TYPE(fmi3SetInt32, const fmi3Int32)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt32, const fmi3UInt32)
+NO_VARIABLES_OF_TYPE(fmi3SetInt64, const fmi3Int64)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt64, const fmi3UInt64)
+NO_VARIABLES_OF_TYPE(fmi3SetBoolean, const fmi3Boolean)
+NO_VARIABLES_OF_TYPE(fmi3SetString, const fmi3String)
+
+fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
+  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetBinary", NO_TYPE) : fmi3OK;
+}
+
+fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
+  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetBinary", NO_TYPE) : fmi3OK;
+}
+
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Clock values[]) {
+  (void)valueReferences; (void)values;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetClock", NO_CLOCKS) : fmi3OK;
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Clock values[]) {
+  (void)valueReferences; (void)values;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetClock", NO_CLOCKS) : fmi3OK;
+}
+
+/* Outputs never depend on the inputs of the same instant (no feedthrough). */
+fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
+                                               size_t *nDependencies) {
+  CHECK_INSTANCE();
+  if (!nnfmu_is_output(valueReference))
+    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetNumberOfVariableDependencies: value reference %lu "
+                                 "is not an output", (unsigned long)valueReference);
+  *nDependencies = 0;
+  return fmi3OK;
+}
+
+fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference dependent,
+                                       size_t elementIndicesOfDependent[], fmi3ValueReference independents[],
+                                       size_t elementIndicesOfIndependents[], fmi3DependencyKind dependencyKinds[],
+                                       size_t nDependencies) {
+  (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents; (void)dependencyKinds;
+  CHECK_INSTANCE();
+  if (!nnfmu_is_output(dependent) || nDependencies != 0)
+    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetVariableDependencies: expected an output and "
+                                 "nDependencies = 0, got value reference %lu and %lu", (unsigned long)dependent,
+                                 (unsigned long)nDependencies);
+  return fmi3OK;
+}
+
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_get_state(INSTANCE, FMUState);
+}
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_set_state(INSTANCE, FMUState);
+}
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+  (void)instance;
+  nnfmu_free_state(FMUState);
+  return fmi3OK;
+}
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
+  (void)FMUState;
+  CHECK_INSTANCE();
+  *size = nnfmu_serialized_size();
+  return fmi3OK;
+}
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
+                                 size_t size) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_serialize(INSTANCE, FMUState, serializedState, size);
+}
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
+                                   fmi3FMUState *FMUState) {
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_deserialize(INSTANCE, serializedState, size, FMUState);
+}
+
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
+  nnfmu_status status;
+  (void)noSetFMUStatePriorToCurrentPoint;
+  CHECK_INSTANCE();
+  status = nnfmu_do_step(INSTANCE, "fmi3DoStep", currentCommunicationPoint, communicationStepSize);
+  if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
+  if (terminateSimulation) *terminateSimulation = fmi3False;
+  if (earlyReturn) *earlyReturn = fmi3False;
+  if (lastSuccessfulTime) *lastSuccessfulTime = nnfmu_time(INSTANCE);
+  return (fmi3Status)status;
+}
