@@ -1,0 +1,78 @@
+"""Figures in the style of the paper's Figs. 2 and 3: inputs on top, predicted vs measured outputs below.
+
+Measured outputs are dashed black lines; each model is a coloured line
+labelled with its NRMSE on that trajectory.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from nnfmu.data import Dataset
+
+
+def representative_index(evaluations: Sequence) -> int:
+    """The trajectory whose mean NRMSE over all models is the median one (the 'typical' case)."""
+    scores = np.mean([ev.result.per_trajectory for ev in evaluations], axis=0)
+    return int(np.argsort(scores)[len(scores) // 2])
+
+
+def _time_axis(n: int, Ts: float) -> tuple[np.ndarray, str]:
+    t = np.arange(n) * Ts
+    if t[-1] < 1.0:
+        return t * 1e3, "time [ms]"
+    return t, "time [s]"
+
+
+def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.PathLike, *,
+                    split: str = "test", index: int | None = None, max_inputs: int = 4) -> Path:
+    """Write a PNG comparing every evaluated model with the measurement on one trajectory.
+
+    Parameters
+    ----------
+    dataset : the scored dataset; evaluations : :class:`nnfmu.cosim.Evaluation` list on ``split``.
+    index : trajectory to show; default :func:`representative_index`.
+    max_inputs : inputs are drawn on top only if there are at most this many (the robot's six
+        torques are left out, as in the paper's Fig. 3).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    idx = representative_index(evaluations) if index is None else index
+    tr = dataset.split(split)
+    u, y = tr.u[idx], tr.y[idx]
+    t, t_label = _time_axis(len(u), dataset.Ts)
+    show_u = dataset.n_u <= max_inputs
+    n_rows = (dataset.n_u if show_u else 0) + dataset.n_y
+    fig, axes = plt.subplots(n_rows, 1, sharex=True, figsize=(8, 1.6 * n_rows + 0.8), squeeze=False)
+    axes = axes[:, 0]
+    row = 0
+    if show_u:
+        for j, ch in enumerate(dataset.inputs):
+            axes[row].plot(t, u[:, j], color="tab:gray", lw=1.0)
+            axes[row].set_ylabel(f"{ch.name} [{ch.unit}]")
+            row += 1
+    for j, ch in enumerate(dataset.outputs):
+        ax = axes[row + j]
+        ax.plot(t, y[:, j], "k--", lw=1.2, label="measured" if j == 0 else None)
+        for ev in evaluations:
+            label = f"{ev.name} ({ev.result.per_trajectory[idx]:.3f})" if j == 0 else None
+            ax.plot(t, ev.predictions[idx][:, j], lw=1.0, label=label)
+        ax.set_ylabel(f"{ch.name} [{ch.unit}]")
+    axes[-1].set_xlabel(t_label)
+    fig.legend(loc="upper center", ncol=min(4, len(evaluations) + 1), fontsize="small", frameon=False)
+    fig.suptitle(f"{split} trajectory {idx}: predicted vs measured (NRMSE in brackets)", y=0.995, fontsize="medium")
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
