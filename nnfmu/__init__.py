@@ -6,6 +6,7 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
   :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
 - scoring: :func:`nrmse`
 - models: :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
+- linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
 - physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`; :func:`sx_to_torch`
 - the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
 - errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
@@ -37,6 +38,9 @@ _LAZY = {
     "valve_system": "nnfmu.physics",
     "arm_system": "nnfmu.physics",
     "sx_to_torch": "nnfmu.hybrid",
+    "identify_linear": "nnfmu.linear",
+    "LinearModel": "nnfmu.linear",
+    "load_linear": "nnfmu.linear",
 }
 
 __all__ = sorted(_LAZY)

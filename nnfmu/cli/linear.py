@@ -1,0 +1,81 @@
+"""``nnfmu linear --data DIR [--order N] -o linear.fmu``: the linear state-space baseline as an FMU.
+
+Identifies the model (:func:`nnfmu.linear.identify_linear`), prints what it
+chose and how it scores, and writes an FMU (``-o``, through the one FMU
+builder), the model's matrices as JSON (``--save``), or both.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from nnfmu.cli.export import add_fmu_options
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("linear", help="identify a linear state-space baseline and write it as an FMU")
+    p.add_argument("--data", required=True, help="dataset folder (train split fitted; valid split, if any, "
+                                                 "chooses the order and guards the refinement)")
+    p.add_argument("--order", type=int, metavar="N", help="number of states (default: chosen on validation)")
+    p.add_argument("--max-order", type=int, default=20, metavar="N", help="largest order tried (default 20)")
+    p.add_argument("--init", choices=["estimate", "zero-offset"], default="estimate",
+                   help="initial state: 'estimate' (default) reproduces y0 closest to equilibrium for u0; "
+                        "'zero-offset' starts at zero with inputs and outputs relative to u0 and y0 "
+                        "(the robot benchmark's convention)")
+    p.add_argument("--no-refine", action="store_true", help="skip the output-error refinement")
+    p.add_argument("--refine-x0", choices=["rule", "fit"], default="rule",
+                   help="refinement starts each training run by the init rule (default) or fits its state")
+    p.add_argument("--max-evaluations", type=int, default=100, metavar="N",
+                   help="residual evaluations allowed to the refinement (default 100)")
+    p.add_argument("-o", "--out", help="the .fmu file to write")
+    p.add_argument("--save", metavar="FILE", help="also (or only) write A, B, C, D and offsets as JSON")
+    p.add_argument("--name", default="linear", help="the FMU's model name (a C identifier; default 'linear')")
+    add_fmu_options(p)
+    p.set_defaults(func=_run)
+
+
+def _summary(model, dataset) -> list[str]:
+    from nnfmu.metrics import nrmse
+
+    info = model.info
+    how = "forced" if info["config"]["order"] else f"chosen on the {info['scored_on']} split"
+    sv = ", ".join(f"{v:.3g}" for v in info["singular_values"][:model.n_x + 3])
+    lines = [f"order {model.n_x} ({how}); horizon {info['horizon']}; singular values {sv}, ...",
+             f"free-run NRMSE on {info['scored_on']}: subspace {info['nrmse_subspace']:.4f}"]
+    refinement = info.get("refinement")
+    if refinement:
+        verdict = "kept" if refinement["accepted"] else "discarded, it was worse"
+        lines[-1] += (f", refined {refinement['nrmse_after']:.4f} ({verdict}; "
+                      f"{refinement['evaluations']} evaluations)")
+    lines.append(f"spectral radius {info['spectral_radius']:.6f}; init rule '{model.init}'")
+    if "test" in dataset.splits:
+        test = dataset.test
+        preds = [model.simulate(u, y[0]) for u, y in zip(test.u, test.y)]
+        lines.append(f"free-run NRMSE on test: {nrmse(list(test.y), preds).mean:.4f}")
+    return lines
+
+
+def _run(args: argparse.Namespace) -> int:
+    from nnfmu.data import load_dataset
+    from nnfmu.errors import ConfigError
+    from nnfmu.linear import LinearConfig, identify_linear
+
+    if not args.out and not args.save:
+        raise ConfigError("nothing to write; give -o MODEL.fmu for an FMU, --save MODEL.json for the matrices, "
+                          "or both")
+    if not args.name.isidentifier():
+        raise ConfigError(f"--name must be a C identifier (letters, digits, '_'), got {args.name!r}")
+    config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
+                          refine=not args.no_refine, refine_x0=args.refine_x0,
+                          max_evaluations=args.max_evaluations)
+    dataset = load_dataset(args.data)
+    model = identify_linear(dataset, config)
+    print("\n".join(_summary(model, dataset)))
+    if args.save:
+        print(f"wrote {model.save(args.save)}")
+    if args.out:
+        from nnfmu.cli.export import write_fmu
+
+        write_fmu(model.casadi_model(name=args.name), Path(args.out), args)
+    return 0

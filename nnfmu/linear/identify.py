@@ -1,0 +1,238 @@
+"""Identify a linear baseline from a dataset: subspace fit, order selection, stabilisation, refinement.
+
+Steps of :func:`identify_linear`:
+
+1. Normalise. Inputs and outputs are divided by their training std. With
+   ``init="estimate"`` the training means are removed and the model is affine
+   (offsets ``b``, ``d`` estimated with ``A, B, C``); with ``init="zero-offset"``
+   each trajectory is taken relative to its first sample and ``b = d = 0``.
+2. Subspace fit (N4SID, :mod:`nnfmu.linear.subspace`) on the training split,
+   with horizon ``s = max(2, ceil((n_max + 1) / n_y))`` unless given.
+3. Order. ``order=N`` forces it. Otherwise every order from 1 to ``max_order``
+   that the singular values support is realised, and the order chosen is the
+   smallest whose free-run NRMSE on the validation split (the training split if
+   there is none) is within ``order_tolerance`` (relative, at least 1e-6) of the best.
+4. Stability. Eigenvalues of ``A`` beyond ``0.999 * max_spectral_radius`` are
+   pulled onto that circle and ``B, b`` refitted.
+5. Refinement (optional, :mod:`nnfmu.linear.refine`): output-error least squares on
+   the free runs of the training split; kept only if the validation NRMSE does
+   not get worse, so refinement never makes the validation error worse.
+6. The scaling is folded back: :class:`~nnfmu.linear.LinearModel` works in physical units.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nnfmu.data import Dataset, Trajectories
+from nnfmu.errors import ConfigError, ShapeError, check_options
+from nnfmu.linear.model import LinearModel
+from nnfmu.linear.refine import X0_OPTIONS, refine
+from nnfmu.linear.statespace import (
+    INIT_OPTIONS,
+    StateSpace,
+    free_run,
+    initial_states,
+    padded,
+    stabilise,
+)
+from nnfmu.linear.subspace import fit_subspace, realise, refit_inputs, usable_columns
+from nnfmu.metrics import nrmse
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinearConfig:
+    """Options of :func:`identify_linear` (see the module docstring for what each step does).
+
+    Attributes
+    ----------
+    order : int or None
+        Number of states; ``None`` chooses it (step 3).
+    max_order : int
+        Largest order tried when choosing.
+    horizon : int or None
+        Past and future block rows of the subspace fit; ``None`` for the rule in step 2.
+    init : {"estimate", "zero-offset"}
+        Initial-state rule of the model (:mod:`nnfmu.linear.model`).
+    refine : bool
+        Run the output-error refinement.
+    refine_x0 : {"rule", "fit"}
+        Training runs start by the init rule, or from a fitted state per trajectory.
+    max_evaluations : int
+        Residual evaluations allowed to the refinement.
+    max_spectral_radius : float
+        No refined ``A`` reaches this spectral radius (in (0, 1]).
+    order_tolerance : float
+        Relative NRMSE tolerance of the order choice.
+    """
+
+    order: int | None = None
+    max_order: int = 20
+    horizon: int | None = None
+    init: str = "estimate"
+    refine: bool = True
+    refine_x0: str = "rule"
+    max_evaluations: int = 100
+    max_spectral_radius: float = 0.9999
+    order_tolerance: float = 0.02
+
+    def __post_init__(self) -> None:
+        for name, allowed in (("init", INIT_OPTIONS), ("refine_x0", X0_OPTIONS)):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(f"{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
+        for name in ("order", "max_order", "horizon", "max_evaluations"):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, (int, np.integer)) or value < 1):
+                raise ConfigError(f"{name} must be a positive integer, got {value!r}")
+        if not 0.0 < self.max_spectral_radius <= 1.0:
+            raise ConfigError(f"max_spectral_radius must be in (0, 1], got {self.max_spectral_radius}")
+        if not self.order_tolerance >= 0.0:
+            raise ConfigError(f"order_tolerance must be >= 0, got {self.order_tolerance}")
+
+    @classmethod
+    def from_dict(cls, options: dict) -> LinearConfig:
+        """Build from a dictionary (JSON, CLI); unknown keys raise UnknownOptionError listing the valid ones."""
+        check_options(options, [f.name for f in dataclasses.fields(cls)], "linear")
+        return cls(**options)
+
+
+@dataclass(frozen=True)
+class _Scaling:
+    """Normalisation: ``(u - u_ref) / u_std``; ``u_ref`` is the training mean or each trajectory's u0."""
+
+    init: str
+    u_mean: np.ndarray
+    u_std: np.ndarray
+    y_mean: np.ndarray
+    y_std: np.ndarray
+
+    def apply(self, tr: Trajectories) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        if self.init == "zero-offset":
+            return ([(u - u[0]) / self.u_std for u in tr.u], [(y - y[0]) / self.y_std for y in tr.y])
+        return ([(u - self.u_mean) / self.u_std for u in tr.u], [(y - self.y_mean) / self.y_std for y in tr.y])
+
+    def physical(self, sys: StateSpace) -> StateSpace:
+        """Fold the scaling into the arrays: the same model, in physical units."""
+        B = sys.B / self.u_std[None, :]
+        C = sys.C * self.y_std[:, None]
+        if self.init == "zero-offset":
+            return StateSpace(sys.A, B, np.zeros(sys.n_x), C, np.zeros(len(self.y_std)))
+        return StateSpace(sys.A, B, sys.b - B @ self.u_mean, C, self.y_std * sys.d + self.y_mean)
+
+
+def free_run_nrmse(sys: StateSpace, init: str, us, ys) -> float:
+    """Free-run NRMSE (mean over trajectories and outputs) of a normalised system on normalised data."""
+    u, _ = padded(list(us))
+    y0s = np.array([y[0] for y in ys])
+    _, yhat = free_run(sys, initial_states(sys, init, y0s, u[:, 0]), u)
+    preds = [np.vstack([y[:1], yhat[i, 1:len(y)]]) for i, y in enumerate(ys)]
+    if not all(np.isfinite(p).all() for p in preds):
+        return float("inf")
+    return nrmse(list(ys), preds).mean
+
+
+def _horizon(config: LinearConfig, n_y: int) -> int:
+    if config.horizon is not None:
+        return config.horizon
+    n_max = config.order or config.max_order
+    return max(2, math.ceil((n_max + 1) / n_y))
+
+
+def _check_data(train: Trajectories, s: int, n_u: int, n_y: int, config: LinearConfig) -> None:
+    needed = s * (2 * n_u + 2 * n_y) + (config.init == "estimate")
+    have = usable_columns(train.lengths, s)
+    what = f"order {config.order}" if config.order else f"orders up to {config.max_order}"
+    if have < needed:
+        raise ShapeError(
+            f"{what} need a subspace horizon of {s} samples, which needs at least {needed} block-Hankel "
+            f"columns (trajectories of at least {2 * s} samples); the training split gives {have} "
+            f"(longest trajectory {int(train.lengths.max())} samples); choose a smaller order or horizon, "
+            "or add data"
+        )
+    if config.order is not None and config.order > s * n_y:
+        raise ShapeError(f"order {config.order} exceeds horizon {s} x {n_y} outputs = {s * n_y}; "
+                         f"choose a horizon of at least {math.ceil(config.order / n_y)}")
+
+
+def _subspace_model(fit, order: int, us, ys, radius: float) -> tuple[StateSpace, bool]:
+    A, B, b, C, d = realise(fit, order, us, ys)
+    stable_A = stabilise(A, radius)
+    if stable_A is not A:
+        B, b = refit_inputs(fit, stable_A, us, ys)
+    return StateSpace(stable_A, B, b, C, d), stable_A is not A
+
+
+def _choose_order(fit, config: LinearConfig, train, check) -> tuple[int, dict]:
+    """The order (step 3) and the validation NRMSE of every order tried."""
+    radius = 0.999 * config.max_spectral_radius
+    scores = {}
+    top = fit.singular_values[0]
+    for n in range(1, min(config.max_order, fit.max_order) + 1):
+        if fit.singular_values[n - 1] <= 1e-10 * top:
+            break  # the data show no more states
+        sys, _ = _subspace_model(fit, n, *train, radius)
+        scores[n] = free_run_nrmse(sys, config.init, *check)
+    best = min(scores.values())
+    limit = best + max(config.order_tolerance * best, 1e-6)
+    return min(n for n, v in scores.items() if v <= limit), scores
+
+
+def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float) -> tuple[StateSpace, dict]:
+    result = refine(sys, *train, init=config.init, x0=config.refine_x0,
+                    max_radius=config.max_spectral_radius, max_evaluations=config.max_evaluations)
+    after = free_run_nrmse(result.system, config.init, *check)
+    accepted = after <= before
+    report = {"x0": config.refine_x0, "evaluations": result.evaluations, "message": result.message,
+              "cost_before": result.cost_before, "cost_after": result.cost_after,
+              "nrmse_after": after, "accepted": bool(accepted)}
+    return (result.system if accepted else sys), report
+
+
+def identify_linear(dataset: Dataset, config: LinearConfig | None = None, **options) -> LinearModel:
+    """Identify a linear state-space baseline from ``dataset``'s training split.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Its ``train`` split is fitted; its ``valid`` split (or, without one, ``train``) chooses
+        the order and guards the refinement.
+    config : LinearConfig, optional
+        All options; or give them as keywords (``order=12, init="zero-offset"``), not both.
+
+    Returns
+    -------
+    LinearModel
+        In the dataset's units; ``info`` records the order, singular values and NRMSEs.
+    """
+    if config is not None and options:
+        raise ConfigError("give a LinearConfig or keyword options, not both")
+    config = config or LinearConfig.from_dict(options)
+    st = dataset.norm_stats("train")
+    scaling = _Scaling(config.init, st.u_mean, st.u_std, st.y_mean, st.y_std)
+    s = _horizon(config, dataset.n_y)
+    _check_data(dataset.train, s, dataset.n_u, dataset.n_y, config)
+    train = scaling.apply(dataset.train)
+    check_split = "valid" if dataset.valid is not None else "train"
+    check = scaling.apply(dataset.split(check_split))
+    fit = fit_subspace(*train, s, constant=config.init == "estimate")
+    if config.order is not None:
+        order, scores = config.order, {}
+    else:
+        order, scores = _choose_order(fit, config, train, check)
+    sys, stabilised = _subspace_model(fit, order, *train, 0.999 * config.max_spectral_radius)
+    before = free_run_nrmse(sys, config.init, *check)
+    info = {"method": "N4SID (state sequence), then output-error least squares" if config.refine else "N4SID",
+            "order": order, "horizon": s, "singular_values": fit.singular_values.tolist(),
+            "order_scores": {str(n): v for n, v in scores.items()}, "stabilised": stabilised,
+            "scored_on": check_split, "nrmse_subspace": before, "config": dataclasses.asdict(config),
+            "dataset": dict(dataset.source)}
+    if config.refine:
+        sys, info["refinement"] = _refine(sys, config, train, check, before)
+    info["nrmse_valid"] = free_run_nrmse(sys, config.init, *check)
+    info["spectral_radius"] = sys.spectral_radius
+    return LinearModel(scaling.physical(sys), config.init, st.y_std, dataset.Ts,
+                       dataset.inputs, dataset.outputs, info)

@@ -1,0 +1,78 @@
+"""``nnfmu linear``: identify, save the matrices, build the FMU, and fmpy agrees with the model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nnfmu.cli import main
+from nnfmu.data import Channel, from_arrays, save_dataset
+from nnfmu.linear import load_linear
+
+
+def _system_data(seed: int = 0):
+    """A third-order two-input, two-output system from rest, with a little output noise."""
+    rng = np.random.default_rng(seed)
+    A = np.array([[0.9, 0.2, 0.0], [-0.2, 0.9, 0.1], [0.0, 0.0, 0.7]])
+    B, C = rng.normal(size=(3, 2)), rng.normal(size=(2, 3)) * [[100.0], [0.01]]
+
+    def run(u):
+        x, y = np.linalg.solve(np.eye(3) - A, B @ u[0]), np.empty((len(u), 2))
+        for k, uk in enumerate(u):
+            y[k], x = C @ x + [20.0, 0.0], A @ x + B @ uk
+        return y + rng.normal(size=y.shape) * [0.5, 5e-5]
+
+    us = [rng.normal(size=(n, 2)) + [0.0, 4.0] for n in (80, 120, 100, 150, 200)]
+    ys = [run(u) for u in us]
+    return from_arrays(Ts=0.05, u_train=us[:3], y_train=ys[:3], u_valid=us[3:4], y_valid=ys[3:4],
+                       u_test=us[4:], y_test=ys[4:], input_names=[Channel("torque", "N.m"), Channel("volt", "V")],
+                       output_names=[Channel("angle", "deg"), Channel("gap", "m")])
+
+
+@pytest.fixture(scope="module")
+def data_dir(tmp_path_factory):
+    return save_dataset(_system_data(), tmp_path_factory.mktemp("linear") / "data")
+
+
+def test_save_writes_a_model_that_scores_as_printed(data_dir, tmp_path, capsys):
+    assert main(["linear", "--data", str(data_dir), "--order", "3", "--save", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    assert "order 3 (forced)" in out and "free-run NRMSE on valid" in out
+    model = load_linear(tmp_path / "m.json")
+    assert model.n_x == 3 and [c.name for c in model.outputs] == ["angle", "gap"]
+    test = _system_data().test
+    from nnfmu.metrics import nrmse
+
+    score = nrmse(test.y[0], model.simulate(test.u[0], test.y[0][0])).mean
+    assert f"free-run NRMSE on test: {score:.4f}" in out
+    assert score < 0.05  # the noise is small, so a third-order model fits well
+
+
+@pytest.mark.parametrize("fmi_version,init", [(2, "estimate"), (3, "zero-offset")])
+def test_fmu_simulates_like_the_model(data_dir, tmp_path, capsys, fmi_version, init):
+    from nnfmu.cosim import simulate_split
+    from nnfmu.data import load_dataset
+
+    fmu, saved = tmp_path / "linear.fmu", tmp_path / "linear.json"
+    argv = ["linear", "--data", str(data_dir), "--init", init, "--max-evaluations", "20",
+            "-o", str(fmu), "--save", str(saved), "--fmi-version", str(fmi_version)]
+    assert main(argv) == 0
+    assert f"FMI {fmi_version}.0" in capsys.readouterr().out
+    model, ds = load_linear(saved), load_dataset(data_dir)
+    (got,) = simulate_split(fmu, ds, "test")
+    want = model.simulate(ds.test.u[0], ds.test.y[0][0])
+    scale = np.abs(want).max(axis=0)  # the outputs differ by 1e4 in size: compare each on its own scale
+    np.testing.assert_allclose(got / scale, want / scale, rtol=0, atol=1e-9)
+
+
+def test_nothing_to_write_is_an_error(data_dir, capsys):
+    assert main(["linear", "--data", str(data_dir)]) == 2
+    assert "nothing to write; give -o MODEL.fmu" in capsys.readouterr().err
+
+
+def test_missing_dataset_and_bad_order(tmp_path, data_dir, capsys):
+    assert main(["linear", "--data", str(tmp_path / "nope"), "--save", str(tmp_path / "m.json")]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert main(["linear", "--data", str(data_dir), "--order", "0", "--save", str(tmp_path / "m.json")]) == 2
+    assert "order must be a positive integer" in capsys.readouterr().err
+    assert not (tmp_path / "m.json").exists()
