@@ -5,7 +5,8 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
 - data: :class:`Dataset`, :class:`Channel`, :class:`Trajectories`, :func:`load_dataset`,
   :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
 - scoring: :func:`nrmse`
-- models: :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
+- models and training: :class:`ModelConfig`, :class:`TrainConfig`, :func:`train`,
+  :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
 - linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
 - physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`; :func:`sx_to_torch`
 - the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
@@ -34,6 +35,9 @@ _LAZY = {
     "Variable": "nnfmu.system",
     "NnfmuError": "nnfmu.errors",
     "load_model": "nnfmu.models",
+    "ModelConfig": "nnfmu.models",
+    "train": "nnfmu.training",
+    "TrainConfig": "nnfmu.training",
     "generate_dataset": "nnfmu.physics",
     "valve_system": "nnfmu.physics",
     "arm_system": "nnfmu.physics",

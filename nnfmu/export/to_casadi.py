@@ -1,0 +1,185 @@
+"""Trained torch networks -> CasADi ``(init, step)`` Functions with the same flat state.
+
+::
+
+    init, step = to_casadi(model)         # init(y0, u0) -> x0;  step(x, u) -> (x_next, y_next)
+    cmodel = casadi_model(model)          # the pair + SystemSpec (name, Ts, units), for build_fmu
+
+The functions work in physical units (normalisation is inside), include the
+skip connection, treat dropout as the identity, and carry exactly the state
+vector documented in :mod:`nnfmu.models.recurrent` and
+:mod:`nnfmu.models.window`, so ``CasadiModel.simulate`` equals
+``model.simulate`` (to about 1e-15 per step in float64). The graphs are MX
+with the weights as dense constants (see :mod:`nnfmu.export.casadi_nets`).
+Every export is checked numerically against the torch step; a model whose
+computation ``to_casadi`` does not know raises :class:`~nnfmu.errors.ExportError`.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+
+import casadi as ca
+import numpy as np
+import torch
+
+from nnfmu.errors import ExportError
+from nnfmu.export import casadi_nets as nets
+from nnfmu.models import MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
+from nnfmu.system import CasadiModel, SystemSpec, Variable
+
+_MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
+_VERIFY_RTOL = 1e-9
+
+
+def _check_modules(model: StepModel) -> None:
+    """Every sub-module must be a layer the builders know; name the first one that is not."""
+    for name, module in model.named_modules():
+        if name and not isinstance(module, nets.SUPPORTED):
+            raise nets.unsupported(name, module)
+
+
+def _recurrent_step(model: RecurrentStepModel, x, un):
+    c = model.config
+    yn = x[0:c.n_y]
+    n_blocks = c.layers * (2 if model.is_lstm else 1)
+    hidden = [x[c.n_y + i * c.hidden:c.n_y + (i + 1) * c.hidden] for i in range(n_blocks)]
+    hs, cs = (hidden[:c.layers], hidden[c.layers:]) if model.is_lstm else (hidden, [None] * c.layers)
+    inp, new_h, new_c = ca.vertcat(yn, un), [], []
+    for i, layer in enumerate(model.rnn_layers):
+        nets.check_recurrent_layer(layer, f"rnn_layers.{i}")
+        h, cell = nets.recurrent_layer_expr(layer, inp, hs[i], cs[i])
+        new_h.append(h)
+        if cell is not None:
+            new_c.append(cell)
+        inp = h
+    yn_next = _skip(model, yn, nets.linear_expr(model.readout, inp))
+    return ca.vertcat(yn_next, *new_h, *new_c), yn_next
+
+
+def _tcn_features(model: TCNStepModel, samples: list):
+    """Feature vector (H, 1) of the newest window position, computing only the positions it needs."""
+    positions = nets.needed_positions(model.convs, len(samples) - 1)
+    h = dict(enumerate(samples))
+    for i, conv in enumerate(model.convs):
+        out = nets.activation_expr(model.activation, nets.conv_expr(conv, h, positions[i + 1]), "activation")
+        cols = ca.horzsplit(out)
+        h = {p: cols[j] if i == 0 else h[p] + cols[j] for j, p in enumerate(positions[i + 1])}
+    return h[len(samples) - 1]
+
+
+def _window_step(model, x, un):
+    c = model.config
+    L = c.window
+    ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
+    us = [x[L * c.n_y + j * c.n_u:L * c.n_y + (j + 1) * c.n_u] for j in range(L - 1)] + [un]
+    samples = [ca.vertcat(y, u) for y, u in zip(ys, us)]
+    if isinstance(model, TCNStepModel):
+        n = nets.linear_expr(model.head, _tcn_features(model, samples))
+    else:
+        n = nets.module_expr(model.net, ca.vertcat(*samples), "net")
+    yn_next = _skip(model, ys[-1], n)
+    return ca.vertcat(*ys[1:], yn_next, *us[1:]), yn_next
+
+
+def _skip(model: StepModel, yn, n):
+    return yn + model.config.skip_scale * n if model.config.skip else n
+
+
+def _init_expr(model: StepModel, yn0, un0):
+    c = model.config
+    if isinstance(model, RecurrentStepModel):
+        return ca.vertcat(yn0, ca.DM.zeros(model.n_x - c.n_y, 1))
+    return ca.vertcat(ca.repmat(yn0, c.window, 1), ca.repmat(un0, c.window - 1, 1))
+
+
+def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca.Function]:
+    """CasADi ``init(y0, u0) -> x0`` and ``step(x, u) -> (x_next, y_next)`` of a network, in physical units.
+
+    Parameters
+    ----------
+    model : StepModel
+        An MLP, RNN, LSTM, GRU or TCN of :mod:`nnfmu.models` (any dtype; weights are taken in float64).
+    verify : bool
+        Compare one step of the result with the torch step from a random state (relative 1e-9).
+
+    Raises
+    ------
+    ExportError
+        For a layer or model class the builders do not know, or a failed verification.
+    """
+    if not isinstance(model, _MODEL_CLASSES):
+        raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
+                          f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
+    _check_modules(model)
+    c = model.config
+    y0, u0 = ca.MX.sym("y0", c.n_y), ca.MX.sym("u0", c.n_u)
+    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
+    u_mean, u_std, y_mean, y_std = (nets.dm(b) for b in (model.u_mean, model.u_std, model.y_mean, model.y_std))
+    x0 = _init_expr(model, (y0 - y_mean) / y_std, (u0 - u_mean) / u_std)
+    builder = _recurrent_step if isinstance(model, RecurrentStepModel) else _window_step
+    x_next, yn_next = builder(model, x, (u - u_mean) / u_std)
+    init = ca.Function("init", [y0, u0], [x0], ["y0", "u0"], ["x0"])
+    step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
+    if verify:
+        verify_export(model, init, step)
+    return init, step
+
+
+def verify_export(model: StepModel, init: ca.Function, step: ca.Function, seed: int = 0) -> None:
+    """Raise ExportError unless ``init`` and one ``step`` from a random state match the torch model."""
+    ref = copy.deepcopy(model).double().eval()
+    rng = np.random.default_rng(seed)
+    c = model.config
+    y0 = ref.y_mean.numpy() + ref.y_std.numpy() * rng.standard_normal(c.n_y)
+    u0 = ref.u_mean.numpy() + ref.u_std.numpy() * rng.standard_normal(c.n_u)
+    x = rng.standard_normal(model.n_x)
+    with torch.no_grad():
+        x0_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(u0)[None])[0].numpy()
+        xn_t, yn_t = (a[0].numpy() for a in ref.step(torch.from_numpy(x)[None], torch.from_numpy(u0)[None]))
+    pairs = {"x0": (np.asarray(init(y0, u0)).ravel(), x0_t)}
+    xn_c, yn_c = step(x, u0)
+    pairs["x_next"], pairs["y_next"] = (np.asarray(xn_c).ravel(), xn_t), (np.asarray(yn_c).ravel(), yn_t)
+    for what, (got, want) in pairs.items():
+        scale = max(float(np.max(np.abs(want))), 1e-300)
+        err = float(np.max(np.abs(got - want))) / scale if got.size else 0.0
+        if not err <= _VERIFY_RTOL:
+            raise ExportError(f"the exported {what} differs from the torch model by {err:.3g} (relative, expected "
+                              f"<= {_VERIFY_RTOL:g}); {type(model).__name__} computes something to_casadi does not "
+                              "reproduce (an overridden method?). Export a model built by nnfmu.models")
+
+
+def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
+    """The network as a :class:`~nnfmu.system.CasadiModel`: :func:`to_casadi` plus a SystemSpec from ``model.meta``.
+
+    ``name`` (a C identifier) defaults to the meta's name; the spec's ``source``
+    records the architecture, its config and the checkpoint's provenance.
+    """
+    init, step = to_casadi(model)
+    meta = model.meta
+    channels = [{k: ch[k] for k in ("name", "unit", "description") if k in ch} for ch in meta["outputs"]]
+    spec = SystemSpec(
+        name=_identifier(name or meta.get("name") or f"{model.config.arch}_model"),
+        Ts=float(meta["Ts"]),
+        inputs=tuple(Variable(**{k: ch[k] for k in ("name", "unit", "description") if k in ch})
+                     for ch in meta["inputs"]),
+        outputs=tuple(Variable(**ch) for ch in channels),
+        description=f"{model.config.arch.upper()} network exported by nnfmu",
+        source=_provenance(model),
+    )
+    return CasadiModel(init, step, spec)
+
+
+def _identifier(name: str) -> str:
+    ident = re.sub(r"\W", "_", str(name))
+    return ident if ident[:1].isalpha() else f"m_{ident}"
+
+
+def _provenance(model: StepModel) -> dict:
+    prov = model.provenance or {}
+    train_config = prov.get("train_config") or {}
+    return {"kind": "nnfmu-network", "arch": model.config.arch, "model_config": model.config.to_dict(),
+            "checkpoint": prov.get("checkpoint"), "best_epoch": prov.get("best_epoch"),
+            "strategy": train_config.get("strategy"), "summary": prov.get("summary", {}),
+            "dataset_source": prov.get("dataset_source", model.meta.get("source", {}))}

@@ -1,0 +1,261 @@
+"""``StepModel``: the one step interface every network implements (DESIGN.md, "The one idea").
+
+Every network is a discrete-time step in physical units::
+
+    x0            = model.init(y0, u0)        # y0 (B, n_y), u0 (B, n_u) -> x0 (B, n_x)
+    x1, y1        = model.step(x0, u0)        # y1 = y(t0 + Ts); no feedthrough from u0 to y0
+    x2, y2        = model.step(x1, u1)        # ... the caller's free-run loop
+
+``model(u, y0)`` runs that loop over a sequence (free run), and
+``model(u, y0, y_meas)`` feeds the measured outputs instead of the predictions
+(teacher forcing, series-parallel training). ``model.simulate(u, y0)`` is the
+numpy free run in float64 that scores and FMUs are compared with.
+
+Internally the network works in normalised units, ``(v - mean) / std`` with
+the mean and std of the training split held as buffers (``u_mean``,
+``u_std``, ``y_mean``, ``y_std``), so they are saved, moved and exported with
+the weights. The flat state ``x`` is kept in normalised units too; its layout
+is documented by each architecture and reproduced exactly by
+:func:`nnfmu.export.to_casadi`.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Mapping
+
+import numpy as np
+import torch
+from torch import nn
+
+from nnfmu.errors import DataError, ShapeError
+from nnfmu.models.config import ModelConfig
+
+
+def default_meta(config: ModelConfig) -> dict:
+    """Meta of a model made without a dataset: ``u1..``, ``y1..`` without units, Ts = 1 s."""
+    return {
+        "name": f"{config.arch}_model",
+        "Ts": 1.0,
+        "inputs": [{"name": f"u{j + 1}", "unit": ""} for j in range(config.n_u)],
+        "outputs": [{"name": f"y{j + 1}", "unit": ""} for j in range(config.n_y)],
+    }
+
+
+def check_meta(meta: Mapping, config: ModelConfig) -> dict:
+    """Return a plain-dict copy of ``meta`` after checking its channels against ``config``."""
+    meta = copy.deepcopy(dict(meta))
+    for key, n in (("inputs", config.n_u), ("outputs", config.n_y)):
+        chans = meta.get(key)
+        if not isinstance(chans, list) or len(chans) != n:
+            got = len(chans) if isinstance(chans, list) else chans
+            raise ShapeError(f"meta[{key!r}] must list {n} channels {{name, unit}} to match the config, got {got}")
+    ts = meta.get("Ts")
+    if not isinstance(ts, (int, float)) or not ts > 0:
+        raise ShapeError(f"meta['Ts'] must be the positive sample time in seconds, got {ts!r}")
+    return meta
+
+
+class StepModel(nn.Module):
+    """Base class of the five networks; see the module docstring for the step contract.
+
+    Subclasses implement the normalised core: :meth:`_init_norm`,
+    :meth:`_step_norm`, :meth:`_inject_y` (used by the generic teacher-forced
+    loop) and may override :meth:`_teacher_forced_norm` and
+    :meth:`_free_run_norm` with faster equivalent calls. They call
+    :meth:`_check_sizes` at the end of ``__init__``.
+
+    Attributes
+    ----------
+    config : ModelConfig
+        Frozen architecture and sizes.
+    meta : dict
+        ``Ts`` (s), ``inputs`` and ``outputs`` as lists of ``{name, unit}``, copied from the dataset.
+    provenance : dict
+        Where the weights come from (checkpoint path, training figures); empty for a fresh model.
+    """
+
+    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+        super().__init__()
+        if not isinstance(config, ModelConfig):
+            raise ShapeError(f"expected a ModelConfig, got {type(config).__name__}; "
+                             "build one with ModelConfig(arch=...)")
+        self.config = config
+        self.meta = default_meta(config) if meta is None else check_meta(meta, config)
+        self.provenance: dict = {}
+        self.register_buffer("u_mean", torch.zeros(config.n_u))
+        self.register_buffer("u_std", torch.ones(config.n_u))
+        self.register_buffer("y_mean", torch.zeros(config.n_y))
+        self.register_buffer("y_std", torch.ones(config.n_y))
+
+    # ---- what subclasses provide -------------------------------------------------------------
+    @property
+    def n_x(self) -> int:
+        """Size of the flat state vector."""
+        raise NotImplementedError
+
+    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        raise NotImplementedError
+
+    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        """State ``x`` with its newest output ``y_k`` replaced by ``yn`` (teacher forcing)."""
+        raise NotImplementedError
+
+    def _skip(self, yn: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        """Apply the optional skip connection: ``y_{k+1} = y_k + skip_scale * N`` or ``N``."""
+        return yn + self.config.skip_scale * n if self.config.skip else n
+
+    def _check_sizes(self) -> None:
+        """Dry-run init and step at batch 2 so that inconsistent sizes fail at construction."""
+        c = self.config
+        try:
+            with torch.no_grad():
+                dtype = self.u_mean.dtype
+                x0 = self._init_norm(torch.zeros(2, c.n_y, dtype=dtype), torch.zeros(2, c.n_u, dtype=dtype))
+                x1, y1 = self._step_norm(x0, torch.zeros(2, c.n_u, dtype=dtype))
+        except RuntimeError as exc:
+            raise ShapeError(f"{type(self).__name__} with {c} has inconsistent layer sizes: {exc}") from exc
+        for what, got, want in (("init -> x0", x0.shape, (2, self.n_x)), ("step -> x_next", x1.shape, (2, self.n_x)),
+                                ("step -> y_next", y1.shape, (2, c.n_y))):
+            if tuple(got) != want:
+                raise ShapeError(f"{type(self).__name__}: {what} has shape {tuple(got)}, expected {want}; "
+                                 "the sub-networks do not fit the config")
+
+    # ---- normalisation -----------------------------------------------------------------------
+    def set_normalisation(self, stats) -> None:
+        """Set the buffers from :class:`nnfmu.data.NormStats` (or a mapping with the same four arrays).
+
+        Means and standard deviations are in physical units, shapes ``(n_u,)`` and ``(n_y,)``.
+        """
+        get = stats.get if isinstance(stats, Mapping) else (lambda k: getattr(stats, k))
+        for name, n in (("u_mean", self.config.n_u), ("u_std", self.config.n_u),
+                        ("y_mean", self.config.n_y), ("y_std", self.config.n_y)):
+            value = torch.as_tensor(np.asarray(get(name), dtype=np.float64)).reshape(-1)
+            if value.shape != (n,):
+                raise ShapeError(f"normalisation {name} has shape {tuple(value.shape)}, expected ({n},)")
+            if not torch.isfinite(value).all() or (name.endswith("std") and (value <= 0).any()):
+                raise DataError(f"normalisation {name} must be finite (std > 0), got {value.tolist()}")
+            getattr(self, name).copy_(value)
+
+    def normalise_u(self, u: torch.Tensor) -> torch.Tensor:
+        return (u - self.u_mean) / self.u_std
+
+    def normalise_y(self, y: torch.Tensor) -> torch.Tensor:
+        return (y - self.y_mean) / self.y_std
+
+    def denormalise_y(self, yn: torch.Tensor) -> torch.Tensor:
+        return yn * self.y_std + self.y_mean
+
+    # ---- the public step interface (physical units) ------------------------------------------
+    def init(self, y0: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """Initial state ``x0`` (B, n_x) from the initial output ``y0`` (B, n_y) and input ``u0`` (B, n_u)."""
+        self._check_batch(y0, self.config.n_y, "y0")
+        self._check_batch(u0, self.config.n_u, "u0", len(y0))
+        return self._init_norm(self.normalise_y(y0), self.normalise_u(u0))
+
+    def step(self, x: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """One sample period: state ``x`` (B, n_x) and input ``u`` (B, n_u) -> ``(x_next, y_next)``.
+
+        ``y_next`` (B, n_y) is the output at ``t + Ts`` in physical units.
+        """
+        self._check_batch(x, self.n_x, "x")
+        self._check_batch(u, self.config.n_u, "u", len(x))
+        x_next, yn_next = self._step_norm(x, self.normalise_u(u))
+        return x_next, self.denormalise_y(yn_next)
+
+    def _check_batch(self, a, n: int, name: str, batch: int | None = None) -> None:
+        ok = isinstance(a, torch.Tensor) and a.ndim == 2 and a.shape[1] == n
+        if not ok or (batch is not None and len(a) != batch):
+            shape = tuple(a.shape) if hasattr(a, "shape") else type(a).__name__
+            want = f"({'B' if batch is None else batch}, {n})"
+            raise ShapeError(f"{name} has shape {shape}, expected a tensor of shape {want}")
+
+    # ---- sequences ---------------------------------------------------------------------------
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        """Free run in normalised units: (B, T, n_u), (B, n_y) -> (B, T, n_y), first row ``yn0``."""
+        x = self._init_norm(yn0, un[:, 0])
+        ys = [yn0]
+        for k in range(un.shape[1] - 1):
+            x, yn = self._step_norm(x, un[:, k])
+            ys.append(yn)
+        return torch.stack(ys, dim=1)
+
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+        """One-step-ahead predictions of ``yn_meas[:, 1:]`` from ``yn_meas[:, k]``, ``un[:, k]``: (B, T-1, n_y).
+
+        The generic loop over :meth:`_step_norm`; subclasses override it with fused calls.
+        """
+        x = self._init_norm(yn_meas[:, 0], un[:, 0])
+        preds = []
+        for k in range(un.shape[1] - 1):
+            x = self._inject_y(x, yn_meas[:, k])
+            x, yn = self._step_norm(x, un[:, k])
+            preds.append(yn)
+        return torch.stack(preds, dim=1)
+
+    def rollout_normalised(self, un: torch.Tensor, yn0: torch.Tensor,
+                           yn_meas: torch.Tensor | None = None) -> torch.Tensor:
+        """:meth:`forward` in normalised units (what the trainer's loss sees): (B, T, n_y)."""
+        if yn_meas is None:
+            return self._free_run_norm(un, yn0)
+        return torch.cat([yn0[:, None], self._teacher_forced_norm(un, yn_meas)], dim=1)
+
+    def forward(self, u: torch.Tensor, y0: torch.Tensor, y_meas: torch.Tensor | None = None) -> torch.Tensor:
+        """Sequence call in physical units.
+
+        Parameters
+        ----------
+        u : tensor (B, T, n_u)
+            Inputs; ``u[:, T-1]`` is not used.
+        y0 : tensor (B, n_y)
+            Initial outputs; the first row of the result.
+        y_meas : tensor (B, T, n_y), optional
+            Measured outputs. If given, ``y_meas[:, k]`` is fed as ``y_k`` (teacher forcing);
+            otherwise the model's own predictions are fed back (free run).
+
+        Returns
+        -------
+        tensor (B, T, n_y)
+        """
+        c = self.config
+        if not isinstance(u, torch.Tensor) or u.ndim != 3 or u.shape[2] != c.n_u or u.shape[1] < 1:
+            raise ShapeError(f"u has shape {tuple(getattr(u, 'shape', ()))}, expected (B, T, {c.n_u}) with T >= 1")
+        self._check_batch(y0, c.n_y, "y0", u.shape[0])
+        want = (*u.shape[:2], c.n_y)
+        if y_meas is not None and (not isinstance(y_meas, torch.Tensor) or tuple(y_meas.shape) != want):
+            raise ShapeError(f"y_meas has shape {tuple(getattr(y_meas, 'shape', ()))}, "
+                             f"expected {(*u.shape[:2], c.n_y)} to match u")
+        ynm = None if y_meas is None else self.normalise_y(y_meas)
+        yn = self.rollout_normalised(self.normalise_u(u), self.normalise_y(y0), ynm)
+        return torch.cat([y0[:, None], self.denormalise_y(yn[:, 1:])], dim=1)
+
+    def simulate(self, u, y0) -> np.ndarray:
+        """Free run in float64 on numpy arrays in physical units.
+
+        Parameters
+        ----------
+        u : array (N, n_u)
+            Inputs; ``u[N-1]`` is not used.
+        y0 : array (n_y,)
+            Initial output, returned as the first row.
+
+        Returns
+        -------
+        ndarray (N, n_y)
+        """
+        c = self.config
+        u = np.array(u, dtype=np.float64)  # a private, writable copy for torch.from_numpy
+        y0 = np.array(y0, dtype=np.float64)
+        if u.ndim != 2 or u.shape[1] != c.n_u or len(u) < 1:
+            raise ShapeError(f"u has shape {u.shape}, expected (n_steps, {c.n_u}) with n_steps >= 1")
+        if y0.shape != (c.n_y,):
+            raise ShapeError(f"y0 has shape {y0.shape}, expected ({c.n_y},)")
+        if not (np.isfinite(u).all() and np.isfinite(y0).all()):
+            raise DataError("u or y0 has non-finite values; remove or interpolate them before simulating")
+        model = copy.deepcopy(self).double().eval()
+        with torch.no_grad():
+            y = model(torch.from_numpy(u)[None], torch.from_numpy(y0)[None])[0]
+        return y.numpy()

@@ -1,0 +1,157 @@
+"""Checkpoints: one ``torch.save`` file of plain dicts, lists, tensors, numbers and strings.
+
+A checkpoint loads with ``torch.load(path, weights_only=True)`` (never
+unrestricted pickle) and holds::
+
+    format, version          "nnfmu-checkpoint", 1
+    model_config             ModelConfig.to_dict()
+    meta                     Ts, inputs, outputs ({name, unit}) and source of the dataset
+    state_dict               the BEST weights (validation free-run NRMSE), normalisation buffers included
+    train_config             TrainConfig.to_dict() (or None)
+    history                  one dict of metrics per epoch
+    best_epoch               epoch of state_dict (0 = before training)
+    summary                  figures for humans and provenance (best validation NRMSE, test NRMSE ...)
+    resume                   what ``--resume`` needs: the LATEST weights, optimizer state, epoch,
+                             torch RNG state, early-stopping counter, elapsed time (or None)
+
+Files are written atomically (temp file + ``os.replace``), so an interrupted
+write never leaves a half checkpoint behind.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping
+
+import torch
+
+from nnfmu.errors import CheckpointError, DataFileError, NnfmuError
+from nnfmu.models.base import StepModel
+from nnfmu.models.config import ModelConfig
+from nnfmu.models.registry import build_model
+
+FORMAT = "nnfmu-checkpoint"
+VERSION = 1
+_REQUIRED = ("model_config", "meta", "state_dict")
+
+
+def state_snapshot(model: torch.nn.Module) -> dict:
+    """Detached copies of the model's weights and buffers (a ``state_dict`` that later training cannot change)."""
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
+def save_checkpoint(
+    path: str | os.PathLike,
+    model: StepModel,
+    *,
+    state_dict: Mapping | None = None,
+    train_config: Mapping | None = None,
+    history: list | None = None,
+    best_epoch: int | None = None,
+    summary: Mapping | None = None,
+    resume: Mapping | None = None,
+) -> Path:
+    """Write a checkpoint of ``model`` atomically; returns the path.
+
+    Parameters
+    ----------
+    path : path of the ``.pt`` file; parent folders are created.
+    model : the network (its config, meta and, unless ``state_dict`` is given, its weights).
+    state_dict : weights to store instead of the model's current ones (the best epoch's).
+    train_config, history, best_epoch, summary, resume : see the module docstring.
+    """
+    path = Path(path)
+    payload = {
+        "format": FORMAT,
+        "version": VERSION,
+        "model_config": model.config.to_dict(),
+        "meta": dict(model.meta),
+        "state_dict": dict(state_dict) if state_dict is not None else state_snapshot(model),
+        "train_config": None if train_config is None else dict(train_config),
+        "history": list(history or []),
+        "best_epoch": best_epoch,
+        "summary": dict(summary or {}),
+        "resume": None if resume is None else dict(resume),
+    }
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        torch.save(payload, tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        raise DataFileError(f"cannot write checkpoint {path}: {exc}; choose a writable --out path") from exc
+    except BaseException:
+        _remove(tmp)
+        raise
+    return path
+
+
+def _remove(tmp: Path) -> None:
+    try:
+        tmp.unlink(missing_ok=True)
+    except OSError:  # e.g. the parent is not a folder: then there is nothing to remove
+        pass
+
+
+def load_checkpoint(path: str | os.PathLike) -> dict:
+    """Read and check a checkpoint file; returns its dict (see the module docstring).
+
+    Raises
+    ------
+    CheckpointError
+        If the file is missing, unreadable or corrupt, or not an nnfmu checkpoint.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint file at {path}; pass the .pt file written by 'nnfmu train --out'")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for corrupt or foreign files
+        raise CheckpointError(f"{path} is not a readable torch checkpoint (corrupt, truncated or another file "
+                              f"type): {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from exc
+    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
+        raise CheckpointError(f"{path} is a torch file but not an nnfmu checkpoint (expected format {FORMAT!r}); "
+                              "train a model with 'nnfmu train' to get one")
+    if not isinstance(ckpt.get("version"), int) or ckpt["version"] > VERSION:
+        raise CheckpointError(f"{path} has checkpoint version {ckpt.get('version')!r}, this nnfmu reads up to "
+                              f"{VERSION}; upgrade nnfmu")
+    missing = [k for k in _REQUIRED if k not in ckpt]
+    if missing:
+        raise CheckpointError(f"{path} lacks {missing}; the checkpoint is damaged, train again")
+    return ckpt
+
+
+def model_from_checkpoint(ckpt: Mapping, state_dict: Mapping | None = None, where: str = "checkpoint") -> StepModel:
+    """Rebuild the network of a loaded checkpoint dict with its best weights (or ``state_dict``)."""
+    try:
+        model = build_model(ModelConfig.from_dict(ckpt["model_config"]), ckpt["meta"])
+        model.load_state_dict(dict(ckpt["state_dict"] if state_dict is None else state_dict))
+    except (NnfmuError, RuntimeError, TypeError, KeyError) as exc:
+        raise CheckpointError(f"{where}: the stored weights do not fit the stored model config ({exc}); "
+                              "the checkpoint is damaged or from an incompatible nnfmu version") from exc
+    return model
+
+
+def load_model(path: str | os.PathLike) -> StepModel:
+    """Load a trained network from a checkpoint written by ``nnfmu train``.
+
+    Returns the model in eval mode with its best weights; ``model.provenance``
+    records the checkpoint path, best epoch, training config and summary.
+
+    Raises
+    ------
+    CheckpointError
+        If the file is missing, corrupt or not an nnfmu checkpoint.
+    """
+    ckpt = load_checkpoint(path)
+    model = model_from_checkpoint(ckpt, where=str(path))
+    model.provenance = {
+        "checkpoint": str(Path(path).resolve()),
+        "best_epoch": ckpt.get("best_epoch"),
+        "train_config": ckpt.get("train_config"),
+        "summary": ckpt.get("summary", {}),
+        "dataset_source": ckpt["meta"].get("source", {}),
+    }
+    return model.eval()

@@ -1,0 +1,142 @@
+"""``ModelConfig``: the typed, frozen description of one network (architecture and sizes).
+
+A config is everything needed to rebuild a network before its weights are
+loaded, so checkpoints store it as a plain dict (:meth:`ModelConfig.to_dict`)
+and rebuild it with :meth:`ModelConfig.from_dict`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Mapping
+
+from nnfmu.errors import ConfigError, ShapeError, check_options
+
+ARCHS = ("mlp", "rnn", "lstm", "gru", "tcn")
+RECURRENT_ARCHS = ("rnn", "lstm", "gru")
+WINDOW_ARCHS = ("mlp", "tcn")
+ACTIVATIONS = ("tanh", "relu", "sigmoid", "elu", "silu")
+# nn.RNN only knows these two nonlinearities.
+RNN_ACTIVATIONS = ("tanh", "relu")
+
+# Per-architecture defaults for the options left as None.
+_DEFAULT_LAYERS = {"mlp": 2, "rnn": 1, "lstm": 1, "gru": 1, "tcn": 3}
+_DEFAULT_MLP_WINDOW = 4
+
+
+def tcn_receptive_field(layers: int, kernel_size: int) -> int:
+    """Number of past samples a TCN with dilations 1, 2, 4, ... sees: ``1 + (k-1)(2^layers - 1)``."""
+    return 1 + (kernel_size - 1) * (2 ** layers - 1)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelConfig:
+    """Architecture and sizes of a step network.
+
+    Attributes
+    ----------
+    arch : {'mlp', 'rnn', 'lstm', 'gru', 'tcn'}
+    n_u, n_y : int
+        Number of inputs and outputs of the system.
+    hidden : int
+        Width of every hidden layer (MLP units, recurrent state size, TCN channels).
+    layers : int or None
+        Hidden layers (MLP), stacked recurrent layers, or dilated convolution
+        layers (TCN, dilation ``2**i`` in layer ``i``). None picks the
+        architecture's default: MLP 2, RNN/LSTM/GRU 1, TCN 3.
+    window : int or None
+        ``L``, the number of past samples of ``[y, u]`` the network sees. MLP:
+        free (default 4). TCN: must equal its receptive field
+        ``1 + (kernel_size-1)(2**layers - 1)`` (None computes it). Recurrent
+        networks see one sample, so their window is 1.
+    kernel_size : int
+        TCN convolution kernel size (ignored otherwise).
+    dropout : float
+        Dropout probability on hidden activations, in [0, 1); active in training only.
+    skip : bool
+        Predict the increment: ``y_{k+1} = y_k + skip_scale * N(...)`` (in normalised units).
+    skip_scale : float
+        Scale of the increment; a small value starts training near "hold the last output".
+    activation : str
+        Nonlinearity of the MLP and TCN layers and of the RNN (RNN: 'tanh' or 'relu').
+        The LSTM and GRU have their fixed gate nonlinearities.
+    """
+
+    arch: str
+    n_u: int
+    n_y: int
+    hidden: int = 32
+    layers: int | None = None
+    window: int | None = None
+    kernel_size: int = 3
+    dropout: float = 0.0
+    skip: bool = True
+    skip_scale: float = 0.1
+    activation: str = "tanh"
+
+    def __post_init__(self) -> None:
+        if self.arch not in ARCHS:
+            raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
+        for name in ("n_u", "n_y", "hidden", "kernel_size"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ShapeError(f"ModelConfig.{name} must be a positive integer, got {value!r}")
+        if self.arch == "tcn" and self.kernel_size < 2:
+            raise ShapeError(f"a TCN needs kernel_size >= 2, got {self.kernel_size}")
+        if self.layers is None:
+            object.__setattr__(self, "layers", _DEFAULT_LAYERS[self.arch])
+        if not isinstance(self.layers, int) or self.layers < 1:
+            raise ShapeError(f"ModelConfig.layers must be a positive integer, got {self.layers!r}")
+        object.__setattr__(self, "window", self._resolve_window())
+        if not 0.0 <= float(self.dropout) < 1.0:
+            raise ConfigError(f"dropout must be in [0, 1), got {self.dropout!r}")
+        object.__setattr__(self, "dropout", float(self.dropout))
+        object.__setattr__(self, "skip_scale", float(self.skip_scale))
+        object.__setattr__(self, "skip", bool(self.skip))
+        valid_act = RNN_ACTIVATIONS if self.arch == "rnn" else ACTIVATIONS
+        if self.activation not in valid_act:
+            raise ConfigError(f"activation {self.activation!r} is not available for arch {self.arch!r}; "
+                              f"choose one of {', '.join(valid_act)}")
+
+    def _resolve_window(self) -> int:
+        w = self.window
+        if w is not None and (not isinstance(w, int) or isinstance(w, bool) or w < 1):
+            raise ShapeError(f"ModelConfig.window must be a positive integer, got {w!r}")
+        if self.arch in RECURRENT_ARCHS:
+            if w not in (None, 1):
+                raise ShapeError(f"a {self.arch.upper()} sees one sample per step (its memory is the hidden "
+                                 f"state), so window must be 1, got {w}; leave window out")
+            return 1
+        if self.arch == "tcn":
+            field = tcn_receptive_field(self.layers, self.kernel_size)
+            if w not in (None, field):
+                raise ShapeError(f"a TCN with {self.layers} layers and kernel_size {self.kernel_size} sees "
+                                 f"{field} samples, got window={w}; pass window={field}, leave it out, or "
+                                 "change layers/kernel_size")
+            return field
+        return _DEFAULT_MLP_WINDOW if w is None else w
+
+    @property
+    def n_in(self) -> int:
+        """Channels of one sample of the network input ``[y_k, u_k]``."""
+        return self.n_y + self.n_u
+
+    def to_dict(self) -> dict:
+        """Plain dict (JSON- and ``weights_only``-safe)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ModelConfig":
+        """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`."""
+        check_options(d, {f.name for f in dataclasses.fields(cls)}, "ModelConfig")
+        return cls(**dict(d))
+
+    def replace(self, **changes) -> "ModelConfig":
+        """A copy with ``changes``; sizes derived from the changed fields are recomputed."""
+        check_options(changes, {f.name for f in dataclasses.fields(self)}, "ModelConfig")
+        if "arch" in changes:
+            changes.setdefault("layers", None)
+        if {"arch", "layers", "kernel_size"} & set(changes):
+            changes.setdefault("window", None if self.arch != "mlp" or "arch" in changes else self.window)
+        return dataclasses.replace(self, **changes)

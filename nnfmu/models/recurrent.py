@@ -1,0 +1,135 @@
+"""RNN, LSTM and GRU step networks with output feedback.
+
+The network's input at step k is ``[y_k, u_k]`` (normalised). Each of the
+``layers`` stacked layers is a one-layer ``nn.RNN`` / ``nn.LSTM`` / ``nn.GRU``
+in PyTorch's standard weight layout (``weight_ih_l0``, ``weight_hh_l0``,
+``bias_ih_l0``, ``bias_hh_l0``; gate order i, f, g, o for the LSTM and r, z, n
+for the GRU), followed by a linear readout of the last layer's hidden state::
+
+    h_k^(1..L) = cells([y_k, u_k], h_{k-1}^(1..L))
+    y_{k+1}    = y_k + skip_scale * readout(h_k^(L))      (skip=True)
+    y_{k+1}    = readout(h_k^(L))                         (skip=False)
+
+Flat state layout, all in normalised units (what the FMU carries)::
+
+    x = [ y_k (n_y) | h^(1) (hidden) | ... | h^(L) (hidden) | c^(1) | ... | c^(L) ]   (c: LSTM only)
+
+``init(y0, u0)`` sets ``y_k = y0`` and all hidden and cell states to zero.
+Dropout (training only) acts on each layer's output, between layers and before the readout.
+The sequence calls use the fused ``nn.GRU`` etc. for teacher forcing and the
+same cell functions as :meth:`step` for the free run.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from nnfmu.models.base import StepModel
+from nnfmu.models.config import RECURRENT_ARCHS, ModelConfig
+
+
+class RecurrentStepModel(StepModel):
+    """RNN / LSTM / GRU with output feedback; ``config.arch`` picks the cell."""
+
+    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+        super().__init__(config, meta)
+        if config.arch not in RECURRENT_ARCHS:
+            raise ValueError(f"RecurrentStepModel needs arch in {RECURRENT_ARCHS}, got {config.arch!r}")
+        self.rnn_layers = nn.ModuleList(
+            _make_layer(config, config.n_in if i == 0 else config.hidden) for i in range(config.layers)
+        )
+        self.dropout = nn.Dropout(config.dropout)
+        self.readout = nn.Linear(config.hidden, config.n_y)
+        self._check_sizes()
+
+    @property
+    def is_lstm(self) -> bool:
+        return self.config.arch == "lstm"
+
+    @property
+    def n_x(self) -> int:
+        c = self.config
+        return c.n_y + c.layers * c.hidden * (2 if self.is_lstm else 1)
+
+    # ---- state packing -----------------------------------------------------------------------
+    def _split(self, x: torch.Tensor) -> tuple[torch.Tensor, list, list]:
+        c = self.config
+        yn = x[:, :c.n_y]
+        # contiguous copies: matrix products on strided views can round differently
+        chunks = [h.contiguous() for h in torch.split(x[:, c.n_y:], c.hidden, dim=1)]
+        hs, cs = (chunks[:c.layers], chunks[c.layers:]) if self.is_lstm else (chunks, [])
+        return yn, hs, cs
+
+    def _pack(self, yn: torch.Tensor, hs: list, cs: list) -> torch.Tensor:
+        return torch.cat([yn, *hs, *cs], dim=1)
+
+    # ---- the core ----------------------------------------------------------------------------
+    def _weights(self) -> tuple:
+        """Per-layer ``(cell function, weights)`` and the readout, fetched once per rollout (per-step overhead)."""
+        if self.is_lstm:
+            cell = torch.lstm_cell
+        elif self.config.arch == "gru":
+            cell = torch.gru_cell
+        else:
+            cell = torch.rnn_relu_cell if self.config.activation == "relu" else torch.rnn_tanh_cell
+        layers = [(m.weight_ih_l0, m.weight_hh_l0, m.bias_ih_l0, m.bias_hh_l0) for m in self.rnn_layers]
+        return cell, layers, (self.readout.weight, self.readout.bias)
+
+    def _cell_step(self, yn, un, hs: list, cs: list, weights: tuple) -> tuple[torch.Tensor, list, list]:
+        """One step on unpacked states; shared by :meth:`_step_norm` and the free run."""
+        cell, layers, readout = weights
+        drop = self.training and self.config.dropout > 0
+        inp = torch.cat([yn, un], dim=1)
+        new_h, new_c = [], []
+        for i, w in enumerate(layers):
+            if self.is_lstm:
+                h, c = cell(inp, (hs[i], cs[i]), *w)
+                new_c.append(c)
+            else:
+                h = cell(inp, hs[i], *w)
+            new_h.append(h)
+            inp = F.dropout(h, self.config.dropout) if drop else h
+        return self._skip(yn, F.linear(inp, *readout)), new_h, new_c
+
+    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        zeros = yn0.new_zeros(yn0.shape[0], self.n_x - self.config.n_y)
+        return torch.cat([yn0, zeros], dim=1)
+
+    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        yn, hs, cs = self._split(x)
+        yn_next, hs, cs = self._cell_step(yn, un, hs, cs, self._weights())
+        return self._pack(yn_next, hs, cs), yn_next
+
+    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
+
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        """Free run without packing the state each step (same operations as :meth:`_step_norm`)."""
+        _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]))
+        yn, ys, weights = yn0, [yn0], self._weights()
+        for un_k in un[:, :-1].unbind(1):
+            yn, hs, cs = self._cell_step(yn, un_k, hs, cs, weights)
+            ys.append(yn)
+        return torch.stack(ys, dim=1)
+
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+        """Fused: each layer runs over the whole sequence in one ``nn.GRU``/... call."""
+        feed = yn_meas[:, :-1]
+        inp = torch.cat([feed, un[:, :-1]], dim=2)
+        for layer in self.rnn_layers:
+            inp, _ = layer(inp)  # zero initial hidden state, as init() sets it
+            inp = self.dropout(inp)
+        return self._skip(feed, self.readout(inp))
+
+
+def _make_layer(config: ModelConfig, n_in: int) -> nn.Module:
+    common = dict(input_size=n_in, hidden_size=config.hidden, num_layers=1, batch_first=True)
+    if config.arch == "lstm":
+        return nn.LSTM(**common)
+    if config.arch == "gru":
+        return nn.GRU(**common)
+    return nn.RNN(nonlinearity=config.activation, **common)

@@ -1,0 +1,81 @@
+"""Window state shared by the MLP and the TCN: the last ``L`` samples of ``[y, u]``.
+
+Flat state layout, all in normalised units (what the FMU carries)::
+
+    x = [ y_{k-L+1} | ... | y_k   (L * n_y) | u_{k-L+1} | ... | u_{k-1}   ((L-1) * n_u) ]
+
+oldest sample first. ``step(x, u_k)`` appends ``u_k`` to complete the window
+of ``L`` samples ``[y_j, u_j]``, predicts ``y_{k+1}``, and shifts the window
+by one sample. ``init(y0, u0)`` fills the window with ``y0`` and ``u0``: the
+system at rest before ``t0``. Teacher forcing pads the measured sequence on
+the left the same way and evaluates all windows in one fused call.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from nnfmu.models.base import StepModel
+
+
+class WindowStepModel(StepModel):
+    """Base of the MLP and TCN; subclasses map windows of samples to the network output ``N``.
+
+    They implement :meth:`_predict_windows` (one window per batch row, used by
+    the step) and :meth:`_predict_sequence` (all windows of a padded sequence
+    at once, used by teacher forcing).
+    """
+
+    @property
+    def n_x(self) -> int:
+        c = self.config
+        return c.window * c.n_y + (c.window - 1) * c.n_u
+
+    def _predict_windows(self, window: torch.Tensor) -> torch.Tensor:
+        """``window`` (B, L, n_y + n_u), oldest first -> ``N`` (B, n_y)."""
+        raise NotImplementedError
+
+    def _predict_sequence(self, padded: torch.Tensor) -> torch.Tensor:
+        """``padded`` (B, T + L - 1, n_y + n_u) -> ``N`` of each of its T windows (B, T, n_y)."""
+        raise NotImplementedError
+
+    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        L = self.config.window
+        return torch.cat([yn0.repeat(1, L), un0.repeat(1, L - 1)], dim=1)
+
+    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        c, B = self.config, x.shape[0]
+        split = c.window * c.n_y
+        y_win = x[:, :split].reshape(B, c.window, c.n_y)
+        u_win = torch.cat([x[:, split:].reshape(B, c.window - 1, c.n_u), un[:, None]], dim=1)
+        yn_k = y_win[:, -1]
+        yn_next = self._skip(yn_k, self._predict_windows(torch.cat([y_win, u_win], dim=2)))
+        x_next = torch.cat([y_win[:, 1:].reshape(B, -1), yn_next, u_win[:, 1:].reshape(B, -1)], dim=1)
+        return x_next, yn_next
+
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        """Free run on a window tensor instead of the flat state: 2 concatenations per step instead of 6.
+
+        The network sees the same numbers in the same layout as in :meth:`_step_norm`, so the
+        result is identical.
+        """
+        c = self.config
+        samples = torch.cat([yn0, un[:, 0]], dim=1)[:, None].expand(-1, c.window - 1, -1)  # the rest state
+        yn, ys = yn0, [yn0]
+        for un_k in un[:, :-1].unbind(1):
+            window = torch.cat([samples, torch.cat([yn, un_k], dim=1)[:, None]], dim=1)
+            yn = self._skip(yn, self._predict_windows(window))
+            ys.append(yn)
+            samples = window[:, 1:]
+        return torch.stack(ys, dim=1)
+
+    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        split = self.config.window * self.config.n_y
+        return torch.cat([x[:, :split - self.config.n_y], yn, x[:, split:]], dim=1)
+
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+        """Fused: every window of the measured sequence in one call of the network."""
+        feed = yn_meas[:, :-1]
+        seq = torch.cat([feed, un[:, :-1]], dim=2)
+        rest = seq[:, :1].expand(-1, self.config.window - 1, -1)
+        return self._skip(feed, self._predict_sequence(torch.cat([rest, seq], dim=1)))

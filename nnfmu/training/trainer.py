@@ -1,0 +1,264 @@
+"""The one trainer for both strategies: :func:`train` (alias :func:`fit`).
+
+A 20-line picture of what it does::
+
+    model = build_model(model_config, dataset meta, normalisation of the train split)
+    for epoch in 1..epochs:
+        for batch of (normalised) trajectories or truncated windows:
+            pred = model.rollout_normalised(un, yn[:, 0])          # parallel: free run
+            pred = model.rollout_normalised(un, yn[:, 0], yn)      # series-parallel: teacher forcing
+            loss = MSE(pred[:, 1:], yn[:, 1:]); AdamW step with gradient clipping
+        valid = free-run NRMSE on the validation split           # both strategies
+        keep the best weights; write the checkpoint; stop after `patience` epochs without progress
+    test = free-run NRMSE (float64) of the best weights on the test split
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from nnfmu.data import Dataset
+from nnfmu.errors import CheckpointError, ConfigError
+from nnfmu.metrics import NrmseResult
+from nnfmu.models.base import StepModel
+from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
+from nnfmu.models.config import ModelConfig
+from nnfmu.models.registry import build_model
+from nnfmu.training.batches import normalised_sequences
+from nnfmu.training.config import TrainConfig
+from nnfmu.training.evaluate import free_run_nrmse
+from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
+
+Callback = Callable[[int, dict], None]
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """What :func:`train` returns.
+
+    Attributes
+    ----------
+    model : StepModel
+        The network with the best weights (lowest validation free-run NRMSE), in eval mode.
+    history : list of dict
+        Per epoch: ``epoch``, ``train_loss``, ``valid_nrmse``, ``best_valid_nrmse``, ``best_epoch``,
+        ``improved``, ``seconds``, ``partial``. Epoch 0 is the untrained network.
+    best_epoch : int
+    best_valid_nrmse : float
+    test : NrmseResult or None
+        Free-run float64 scores of the best weights on the test split (None if
+        the run was interrupted, the dataset has no test split, or the simulation diverged).
+    stop_reason : str
+        'epochs', 'early-stopping', 'time-budget', 'callback', 'SIGINT' or 'SIGTERM'.
+    checkpoint : Path or None
+    notes : list of str
+        Things the user should know (e.g. a validation split was carved out of train).
+    """
+
+    model: StepModel
+    history: list
+    best_epoch: int
+    best_valid_nrmse: float
+    test: NrmseResult | None
+    stop_reason: str
+    checkpoint: Path | None
+    elapsed_s: float
+    notes: list = field(default_factory=list)
+
+    @property
+    def test_nrmse(self) -> float | None:
+        return None if self.test is None else self.test.mean
+
+
+def dataset_meta(ds: Dataset, arch: str) -> dict:
+    """The model's ``meta``: name, Ts, channels and (JSON-clean) provenance of the dataset."""
+    source = json.loads(json.dumps(dict(ds.source), default=_jsonable))
+    system = source.get("system") or source.get("name") or source.get("kind") or "model"
+    return {"name": f"{system}_{arch}", "Ts": float(ds.Ts), "inputs": [c.to_json() for c in ds.inputs],
+            "outputs": [c.to_json() for c in ds.outputs], "source": source}
+
+
+def _jsonable(v):
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def _prepare(dataset: Dataset, cfg: TrainConfig) -> tuple[Dataset, list]:
+    if not isinstance(dataset, Dataset):
+        raise ConfigError(f"expected an nnfmu.data.Dataset, got {type(dataset).__name__}; "
+                          "load one with nnfmu.load_dataset(folder)")
+    if dataset.valid is not None:
+        return dataset, []
+    carved = dataset.with_validation(cfg.valid_fraction, seed=cfg.seed)
+    how = (f"{carved.valid.n_traj} of {dataset.train.n_traj} training trajectories"
+           if dataset.train.n_traj >= 2 else f"the last {cfg.valid_fraction:.0%} of the training record")
+    return carved, [f"the dataset has no 'valid' split; validating on {how} (valid_fraction={cfg.valid_fraction})"]
+
+
+def _new_model(model_config, dataset: Dataset, cfg: TrainConfig) -> StepModel:
+    if isinstance(model_config, StepModel):  # trained further as it is: its normalisation and meta are kept
+        config = model_config.config
+    else:
+        config = ModelConfig.from_dict(model_config) if isinstance(model_config, Mapping) else model_config
+    if not isinstance(config, ModelConfig):
+        raise ConfigError(f"expected a ModelConfig, a dict or a StepModel, got {type(model_config).__name__}")
+    if (config.n_u, config.n_y) != (dataset.n_u, dataset.n_y):
+        raise ConfigError(f"the model config has n_u={config.n_u}, n_y={config.n_y} but the dataset has "
+                          f"{dataset.n_u} inputs and {dataset.n_y} outputs; build the config from the dataset")
+    if isinstance(model_config, StepModel):
+        return model_config
+    torch.manual_seed(cfg.seed)
+    return build_model(config, dataset_meta(dataset, config.arch), norm=dataset.norm_stats("train"))
+
+
+def _resumed_model(ckpt: dict, model_config, out: Path, dataset: Dataset) -> StepModel:
+    if ckpt.get("resume") is None:
+        raise CheckpointError(f"{out} holds no training state to resume from; train without resume")
+    names = [[c["name"] for c in ckpt["meta"][k]] for k in ("inputs", "outputs")]
+    if names != [dataset.input_names, dataset.output_names] or ckpt["meta"]["Ts"] != dataset.Ts:
+        raise ConfigError(f"cannot resume {out}: it was trained on inputs {names[0]}, outputs {names[1]}, "
+                          f"Ts {ckpt['meta']['Ts']:g} s, but the dataset has {dataset.input_names}, "
+                          f"{dataset.output_names}, Ts {dataset.Ts:g} s; resume on the same dataset")
+    stored = ModelConfig.from_dict(ckpt["model_config"])
+    given = model_config.config if isinstance(model_config, StepModel) else model_config
+    if isinstance(given, Mapping):
+        given = ModelConfig.from_dict(given)
+    if given is not None and given != stored:
+        raise ConfigError(f"cannot resume {out}: it was trained with {stored}, now asked for {given}; "
+                          "resume with the same model options, or train into a new --out file")
+    return model_from_checkpoint(ckpt, state_dict=ckpt["resume"]["state_dict"], where=str(out))
+
+
+def train(
+    dataset: Dataset,
+    model_config: ModelConfig | Mapping | StepModel | None,
+    train_config: TrainConfig | Mapping | None = None,
+    *,
+    out: str | os.PathLike | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    callback: Callback | None = None,
+) -> TrainResult:
+    """Train a step network in parallel or series-parallel mode; early stopping on validation free-run NRMSE.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Physical-unit data; normalisation statistics come from its train split.
+        Without a ``valid`` split, ``train_config.valid_fraction`` of it is carved out (see ``notes``).
+    model_config : ModelConfig, dict or StepModel
+        The network to build (seeded with ``train_config.seed``), or a model to go on
+        training. With ``resume`` it may be None (the checkpoint's config is used).
+    train_config : TrainConfig or dict, optional
+        Defaults to ``TrainConfig()``; with ``resume`` and None, the checkpoint's.
+    out : path, optional
+        Checkpoint file, rewritten atomically after every epoch (best weights + resume state).
+    resume : bool
+        Continue the run stored in ``out``; with the same seed the result equals an uninterrupted run.
+    progress : bool
+        Show a tqdm bar with the loss and the validation NRMSE.
+    callback : callable, optional
+        ``callback(epoch, metrics)`` after every epoch; raise :class:`StopTraining` to stop.
+
+    Raises
+    ------
+    TrainingError
+        If the loss becomes NaN or infinite.
+    DataError, ConfigError, CheckpointError
+        For bad data, options or checkpoints.
+    """
+    out = None if out is None else Path(out)
+    ckpt = None
+    if resume:
+        if out is None:
+            raise ConfigError("resume=True needs out=<checkpoint path> to resume from")
+        ckpt = load_checkpoint(out)
+        if train_config is None and ckpt.get("train_config"):
+            train_config = TrainConfig.from_dict(ckpt["train_config"])
+    cfg = _as_train_config(train_config)
+    dataset, notes = _prepare(dataset, cfg)
+    dtype = getattr(torch, cfg.dtype)
+    with torch.random.fork_rng(devices=[]), flush_denormals():
+        model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
+        model = model.to(dtype)
+        session = Session(model, cfg, normalised_sequences(model, dataset.train, dtype, "train"), dataset.valid, out)
+        if ckpt:
+            session.restore(ckpt)
+        stop_reason = _run(session, progress, callback)
+        test = None
+        if stop_reason not in ("SIGINT", "SIGTERM"):  # an interrupted run stops at once; the file is up to date
+            best = copy.deepcopy(model).eval()
+            best.load_state_dict(session.best_state)
+            test = free_run_nrmse(best, dataset.test, float64=True) if "test" in dataset.splits else None
+            # still inside fork_rng: the resume state saved here holds the training RNG, not the caller's
+            session.save({"test_nrmse": None if test is None else test.mean, "stop_reason": stop_reason})
+    model.load_state_dict(session.best_state)
+    model.eval()
+    return TrainResult(model, session.history, session.best_epoch, session.best_score, test, stop_reason,
+                       out, session.elapsed, notes)
+
+
+fit = train
+
+
+def _as_train_config(train_config) -> TrainConfig:
+    if train_config is None:
+        return TrainConfig()
+    if isinstance(train_config, Mapping):
+        return TrainConfig.from_dict(train_config)
+    if not isinstance(train_config, TrainConfig):
+        raise ConfigError(f"expected a TrainConfig or a dict, got {type(train_config).__name__}")
+    return train_config
+
+
+def _run(session: Session, progress: bool, callback: Callback | None) -> str:
+    """The epoch loop; returns why it stopped."""
+    cfg = session.cfg
+    deadline = None if cfg.max_minutes is None else time.monotonic() + 60.0 * cfg.max_minutes
+    if session.epoch == 0 and not session.history:
+        session.record(None, session.validate(), 0.0, False)
+        session.save()
+    bar = tqdm(total=cfg.epochs, initial=min(session.epoch, cfg.epochs), disable=not progress,
+               unit="epoch", desc=f"{session.model.config.arch} {cfg.strategy}", dynamic_ncols=True)
+    with StopRequests() as stop, bar:
+        _show(bar, session.history[-1])
+        while session.epoch < cfg.epochs and not session.patience_exhausted():
+            t0 = time.monotonic()  # an epoch always starts: at least one batch per call, even over budget
+            loss, early = session.train_epoch(stop, deadline)
+            if stop.reason:
+                return stop.reason  # the unfinished epoch is dropped; the file holds the last finished one
+            session.epoch += 1
+            entry = session.record(loss, session.validate(), time.monotonic() - t0, early)
+            session.save()
+            _show(bar, entry)
+            bar.update(1)
+            if callback is not None:
+                try:
+                    callback(session.epoch, dict(entry))
+                except StopTraining:
+                    return "callback"
+            if early:
+                return "time-budget"
+        return "early-stopping" if session.patience_exhausted() else "epochs"
+
+
+def _show(bar, entry: dict) -> None:
+    loss = entry["train_loss"]
+    bar.set_postfix(loss="-" if loss is None else f"{loss:.3g}", valid=f"{entry['valid_nrmse']:.4f}",
+                    best=f"{entry['best_valid_nrmse']:.4f}@{entry['best_epoch']}", refresh=True)
+    if not math.isfinite(entry["valid_nrmse"]):
+        bar.write(f"epoch {entry['epoch']}: the validation free run diverged (non-finite outputs)")
