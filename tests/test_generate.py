@@ -173,3 +173,33 @@ def test_arm_benchmark_size_is_about_the_real_benchmark():
     assert 38000 <= cfg.n_train * cfg.train_segments * per_traj <= 42000
     assert cfg.n_test == 1 and 3400 <= cfg.test_segments * per_traj <= 3800
     assert math.isclose(cfg.period, 10.0) and cfg.n_harmonics == 5
+
+
+def test_interrupted_arm_generation_resumes_from_finished_trajectories(tmp_path, monkeypatch):
+    import nnfmu.physics.generate_arm as gen
+
+    real = gen._trajectory
+    calls = []
+
+    def first_then_stop(*args, **kwargs):
+        if calls:
+            raise KeyboardInterrupt
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    partial = tmp_path / ".arm.partial"
+    monkeypatch.setattr(gen, "_trajectory", first_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        gen.generate_arm(size="small", seed=3, partial_dir=partial)
+    assert (partial / "0_0.npz").exists()
+
+    simulated = []
+    monkeypatch.setattr(gen, "_trajectory", lambda *a, **k: simulated.append(1) or real(*a, **k))
+    resumed = gen.generate_arm(size="small", seed=3, partial_dir=partial)
+    assert len(simulated) == resumed.train.n_traj + resumed.test.n_traj - 1  # the finished one was reused
+    fresh = gen.generate_arm(size="small", seed=3)
+    for a, b in zip(resumed.train.u + resumed.test.y, fresh.train.u + fresh.test.y):
+        np.testing.assert_array_equal(a, b)
+    # another request (seed) must not reuse the stored trajectories
+    other = gen.generate_arm(size="small", seed=4, partial_dir=partial)
+    assert not np.array_equal(other.train.u[0], resumed.train.u[0])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -23,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="non-negative random seed (default 0)")
     p.add_argument("--force", action="store_true", help="replace an existing dataset folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.epilog = ("Stopping a slow generation (the arm) keeps the finished trajectories in .<out>.partial "
+                "beside the target; the same command resumes from them.")
     p.set_defaults(func=_run)
 
 
@@ -52,8 +55,11 @@ def _run(args: argparse.Namespace) -> int:
     check_request(args.system, size, args.seed)
     out = Path(args.out)
     _check_writable(out, args.force)
-    ds = generate_dataset(args.system, size=size, seed=args.seed, progress=not args.quiet and sys.stderr.isatty())
+    partial = out.resolve().parent / f".{out.name}.partial"
+    ds = generate_dataset(args.system, size=size, seed=args.seed, progress=not args.quiet and sys.stderr.isatty(),
+                          partial_dir=partial)
     save_dataset(ds, out, overwrite=args.force)
+    shutil.rmtree(partial, ignore_errors=True)
     print(f"wrote {out}")
     print(ds.summary())
     return 0

@@ -22,7 +22,8 @@ def check_request(system: str, size: str, seed: int) -> None:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
 
 
-def generate_dataset(system: str, *, size: str = "small", seed: int = 0, progress: bool = False) -> Dataset:
+def generate_dataset(system: str, *, size: str = "small", seed: int = 0, progress: bool = False,
+                     partial_dir=None) -> Dataset:
     """Simulate a physics reference model and return its dataset (train and test splits).
 
     Parameters
@@ -37,6 +38,9 @@ def generate_dataset(system: str, *, size: str = "small", seed: int = 0, progres
         Non-negative; the same seed gives the same dataset.
     progress : bool
         Show a tqdm progress bar.
+    partial_dir : path, optional
+        Where a slow generator (the arm) keeps finished trajectories so that an interrupted run resumes
+        (:mod:`nnfmu.physics.partial`); the valve generates in seconds and does not use it.
     """
     check_request(system, size, seed)
     if system == "valve":
@@ -45,4 +49,4 @@ def generate_dataset(system: str, *, size: str = "small", seed: int = 0, progres
         return generate_valve(size=size, seed=seed, progress=progress)
     from nnfmu.physics.generate_arm import generate_arm
 
-    return generate_arm(size=size, seed=seed, progress=progress)
+    return generate_arm(size=size, seed=seed, progress=progress, partial_dir=partial_dir)

@@ -34,6 +34,7 @@ from nnfmu.physics.arm import (ARM_Q_LIMITS_DEG, ARM_TS, Q_DH_OFFSET, THETA_OFFS
                                arm_links, counterbalance_torque)
 from nnfmu.physics.arm_dynamics import forward_dynamics, rnea
 from nnfmu.physics.base import parameter_variables, params_to_json, unpack_parameters
+from nnfmu.physics.partial import PartialTrajectories
 
 __all__ = ["ArmDataConfig", "ARM_SIZES", "ARM_KP", "ARM_KV", "ARM_WORK_RANGE_DEG", "ARM_QD_MAX_DEG", "ARM_QDD_MAX_DEG",
            "blend_time", "fourier_coefficients", "generate_arm"]
@@ -184,12 +185,18 @@ def _trajectory(integ, coefs: list[np.ndarray], cfg: ArmDataConfig) -> tuple[np.
     return np.vstack(torque), y
 
 
-def _split(integ, cfg: ArmDataConfig, n_traj: int, n_seg: int, seed: int, split: int, bar) -> Trajectories:
+def _split(integ, cfg: ArmDataConfig, n_traj: int, n_seg: int, seed: int, split: int, bar,
+           partial: PartialTrajectories) -> Trajectories:
     us, ys = [], []
     for i in range(n_traj):
-        rng = np.random.default_rng([seed, split, i])
-        coefs = [fourier_coefficients(rng, cfg) for _ in range(n_seg)]
-        u, y = _trajectory(integ, coefs, cfg)
+        done = partial.load(split, i)
+        if done is None:
+            rng = np.random.default_rng([seed, split, i])
+            coefs = [fourier_coefficients(rng, cfg) for _ in range(n_seg)]
+            u, y = _trajectory(integ, coefs, cfg)
+            partial.store(split, i, u, y)
+        else:
+            u, y = done
         us.append(u)
         ys.append(y)
         if bar is not None:
@@ -198,7 +205,7 @@ def _split(integ, cfg: ArmDataConfig, n_traj: int, n_seg: int, seed: int, split:
 
 
 def generate_arm(*, size: str = "small", seed: int = 0, progress: bool = False,
-                 params: ArmParams | None = None) -> Dataset:
+                 params: ArmParams | None = None, partial_dir=None) -> Dataset:
     """Generate an arm dataset: inputs tau1..tau6 (motor N m), outputs q1..q6 (deg), Ts = 0.1 s.
 
     Parameters
@@ -211,19 +218,24 @@ def generate_arm(*, size: str = "small", seed: int = 0, progress: bool = False,
         Show a tqdm progress bar over trajectories.
     params : ArmParams, optional
         Physical parameters of the simulated arm (default: the identified values).
+    partial_dir : path, optional
+        Keep finished trajectories here (see :mod:`nnfmu.physics.partial`), so that an interrupted
+        generation resumes where it stopped; the caller removes it once the dataset is saved.
     """
     if size not in ARM_SIZES:
         raise ConfigError(f"unknown arm dataset size {size!r}; valid sizes are {', '.join(ARM_SIZES)}")
     cfg, params = ARM_SIZES[size], params or ArmParams()
     n_per_seg = int(round(cfg.segment_time / ARM_TS))
     integ = _closed_loop_integrator(params, cfg, n_per_seg)
+    partial = PartialTrajectories(partial_dir, {"system": "arm", "size": size, "seed": seed,
+                                                "params": params_to_json(params)})
     bar = None
     if progress:
         from tqdm.auto import tqdm
         bar = tqdm(total=cfg.n_train + cfg.n_test, desc="arm trajectories", unit="traj")
     try:
-        train = _split(integ, cfg, cfg.n_train, cfg.train_segments, seed, 0, bar)
-        test = _split(integ, cfg, cfg.n_test, cfg.test_segments, seed, 1, bar)
+        train = _split(integ, cfg, cfg.n_train, cfg.train_segments, seed, 0, bar, partial)
+        test = _split(integ, cfg, cfg.n_test, cfg.test_segments, seed, 1, bar, partial)
     finally:
         if bar is not None:
             bar.close()
