@@ -4,6 +4,10 @@ Trains one network with the one trainer, shows a progress bar with the loss
 and the validation free-run NRMSE, writes the checkpoint after every epoch,
 and prints the free-run test NRMSE of the best weights. Ctrl-C (or SIGTERM)
 stops and keeps the best checkpoint; ``--resume`` continues it.
+
+``--arch hybrid --physics valve|arm [--physics-params FILE.json] [--train-physics NAME,...]``
+trains a physics model plus a neural correction (:mod:`nnfmu.hybrid`): parallel strategy only,
+in float64, on one CPU thread; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
 """
 
 from __future__ import annotations
@@ -38,16 +42,39 @@ _TRAIN_OPTIONS = (
 )
 
 
+# (option, HybridConfig field, type, help): only with --arch hybrid.
+_HYBRID_OPTIONS = (
+    ("--physics", "physics", str, "physics model of a hybrid: valve or arm (required with --arch hybrid)"),
+    ("--physics-params", "physics_params", str,
+     "JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} (default: nominal)"),
+    ("--train-physics", "train_physics", str,
+     "comma-separated physical parameters trained with the network, in log-space (default: none)"),
+    ("--correction", "correction", str,
+     "where the network corrects the physics: derivative (inside every RK4 stage, default) or step (after it)"),
+    ("--n-sub", "n_sub", int, "RK4 sub-steps per sample (default: the physics' own)"),
+    ("--physics-backend", "physics_backend", str,
+     "how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler needed)"),
+)
+_HYBRID_CHOICES = {"physics": ("valve", "arm"), "correction": ("derivative", "step"),
+                   "physics_backend": ("compiled", "sx")}
+_HYBRID_METAVARS = {"physics_params": "FILE.json", "train_physics": "NAME,...", "n_sub": "N"}
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train a network (parallel or series-parallel) on a dataset folder",
                        description=_DESCRIPTION)
     p.add_argument("--data", required=True, help="dataset folder (meta.json, train.npz, test.npz[, valid.npz])")
-    p.add_argument("--arch", choices=["mlp", "rnn", "lstm", "gru", "tcn"], help="network architecture")
+    p.add_argument("--arch", choices=["mlp", "rnn", "lstm", "gru", "tcn", "hybrid"],
+                   help="network architecture, or hybrid (physics + neural correction; see --physics)")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"],
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
     p.add_argument("--out", required=True, help="checkpoint file to write (.pt)")
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
         p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
+    hybrid = p.add_argument_group("hybrid models (--arch hybrid)")
+    for flag, dest, typ, text in _HYBRID_OPTIONS:
+        hybrid.add_argument(flag, dest=dest, type=typ, default=None, choices=_HYBRID_CHOICES.get(dest),
+                            metavar=_HYBRID_METAVARS.get(dest), help=text)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -58,14 +85,30 @@ def _given(args: argparse.Namespace, options) -> dict:
     return {dest: getattr(args, dest) for _, dest, _, _ in options if getattr(args, dest) is not None}
 
 
-def _train_config(args: argparse.Namespace, stored: dict | None):
+def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
+    from nnfmu.errors import ConfigError
     from nnfmu.training import TrainConfig
 
     changes = _given(args, _TRAIN_OPTIONS)
     if args.strategy is not None:
         changes["strategy"] = args.strategy
-    base = TrainConfig.from_dict(stored) if stored else TrainConfig()
+    if hybrid and changes.get("strategy", "parallel") != "parallel":
+        raise ConfigError("a hybrid model trains in parallel mode only (its state is the full physics state, which "
+                          "measured outputs cannot overwrite); drop --strategy or pass --strategy parallel")
+    base = TrainConfig.from_dict(stored) if stored else TrainConfig(dtype="float64" if hybrid else "float32")
     return base.replace(**changes)
+
+
+def _hybrid_given(args: argparse.Namespace) -> dict:
+    """The hybrid options given on the command line, as HybridConfig fields (the parameter file read)."""
+    from nnfmu.hybrid import load_physics_params
+
+    given = _given(args, _HYBRID_OPTIONS)
+    if "physics_params" in given:
+        given["physics_params"] = load_physics_params(given["physics_params"])
+    if "train_physics" in given:
+        given["train_physics"] = tuple(n.strip() for n in given["train_physics"].split(",") if n.strip())
+    return given
 
 
 def _model_config(args: argparse.Namespace, ds, stored: dict | None):
@@ -73,9 +116,16 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     from nnfmu.models import ModelConfig
 
     given = _given(args, _MODEL_OPTIONS)
+    arch = args.arch or (stored or {}).get("arch")
+    hybrid_given = _given(args, _HYBRID_OPTIONS)
+    if hybrid_given and arch != "hybrid":
+        flags = [flag for flag, dest, _, _ in _HYBRID_OPTIONS if dest in hybrid_given]
+        raise ConfigError(f"{', '.join(flags)} only apply to --arch hybrid; drop them or train a hybrid")
+    if arch == "hybrid":
+        given.update(_hybrid_given(args))
     if stored is not None:
         config = ModelConfig.from_dict(stored)
-        clash = {k: v for k, v in given.items() if getattr(config, k) != v}
+        clash = {k: v for k, v in given.items() if _differs(config, k, v)}
         if args.arch is not None and args.arch != config.arch:
             clash["arch"] = args.arch
         if clash:
@@ -83,8 +133,26 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
                               "Drop them, or train into a new --out file")
         return config
     if args.arch is None:
-        raise ConfigError("--arch is required (mlp, rnn, lstm, gru or tcn) unless --resume is given")
+        raise ConfigError("--arch is required (mlp, rnn, lstm, gru, tcn or hybrid) unless --resume is given")
+    if arch == "hybrid":
+        from nnfmu.hybrid import HybridConfig
+
+        if "physics" not in given:
+            raise ConfigError("--arch hybrid needs --physics valve or --physics arm (the physics model to correct)")
+        return HybridConfig(n_u=ds.n_u, n_y=ds.n_y, **given)
     return ModelConfig(arch=args.arch, n_u=ds.n_u, n_y=ds.n_y, **given)
+
+
+def _differs(config, key: str, value) -> bool:
+    """Whether a given option differs from the stored config (hybrid options compared after normalising)."""
+    from nnfmu.errors import NnfmuError
+
+    if key not in {dest for _, dest, _, _ in _HYBRID_OPTIONS}:
+        return getattr(config, key) != value
+    try:
+        return getattr(config.replace(**{key: value}), key) != getattr(config, key)
+    except NnfmuError:
+        return True
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -101,7 +169,12 @@ def _run(args: argparse.Namespace) -> int:
     if stored is None and out.exists() and not args.force:
         raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
-    train_config = _train_config(args, None if stored is None else stored.get("train_config"))
+    hybrid = model_config.arch == "hybrid"
+    train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
+    if hybrid:  # hundreds of tiny operations per step: more intra-op threads only add contention
+        import torch
+
+        torch.set_num_threads(1)
     result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet)
     for note in result.notes:
         print(f"note: {note}")

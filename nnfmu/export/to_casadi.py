@@ -27,6 +27,7 @@ import torch
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.models import MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
+from nnfmu.models.config import HYBRID_ARCH
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 
 _MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
@@ -100,7 +101,9 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     Parameters
     ----------
     model : StepModel
-        An MLP, RNN, LSTM, GRU or TCN of :mod:`nnfmu.models` (any dtype; weights are taken in float64).
+        An MLP, RNN, LSTM, GRU or TCN of :mod:`nnfmu.models` (any dtype; weights are taken in float64),
+        or a hybrid (:mod:`nnfmu.hybrid`): then the ports are ``init(y0, u0, p)`` and
+        ``step(x, u, p)``, with ``p`` the physical parameters (see :func:`nnfmu.hybrid.hybrid_to_casadi`).
     verify : bool
         Compare one step of the result with the torch step from a random state (relative 1e-9).
 
@@ -109,6 +112,10 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     ExportError
         For a layer or model class the builders do not know, or a failed verification.
     """
+    if _is_hybrid(model):
+        from nnfmu.hybrid.export import hybrid_to_casadi
+
+        return hybrid_to_casadi(model, verify=verify)
     if not isinstance(model, _MODEL_CLASSES):
         raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
                           f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
@@ -154,8 +161,13 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
     """The network as a :class:`~nnfmu.system.CasadiModel`: :func:`to_casadi` plus a SystemSpec from ``model.meta``.
 
     ``name`` (a C identifier) defaults to the meta's name; the spec's ``source``
-    records the architecture, its config and the checkpoint's provenance.
+    records the architecture, its config and the checkpoint's provenance. A hybrid's
+    physical parameters (their trained values) become the spec's parameters.
     """
+    if _is_hybrid(model):
+        from nnfmu.hybrid.export import hybrid_casadi_model
+
+        return hybrid_casadi_model(model, name=name)
     init, step = to_casadi(model)
     meta = model.meta
     channels = [{k: ch[k] for k in ("name", "unit", "description") if k in ch} for ch in meta["outputs"]]
@@ -169,6 +181,11 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         source=_provenance(model),
     )
     return CasadiModel(init, step, spec)
+
+
+def _is_hybrid(model) -> bool:
+    """A :class:`nnfmu.hybrid.HybridStepModel` (physics + correction): exported by :mod:`nnfmu.hybrid.export`."""
+    return isinstance(model, StepModel) and model.config.arch == HYBRID_ARCH
 
 
 def _identifier(name: str) -> str:

@@ -19,6 +19,8 @@ WINDOW_ARCHS = ("mlp", "tcn")
 ACTIVATIONS = ("tanh", "relu", "sigmoid", "elu", "silu")
 # nn.RNN only knows these two nonlinearities.
 RNN_ACTIVATIONS = ("tanh", "relu")
+# Physics + neural correction: nnfmu.hybrid.HybridConfig / HybridStepModel.
+HYBRID_ARCH = "hybrid"
 
 # Per-architecture defaults for the options left as None.
 _DEFAULT_LAYERS = {"mlp": 2, "rnn": 1, "lstm": 1, "gru": 1, "tcn": 3}
@@ -128,8 +130,16 @@ class ModelConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "ModelConfig":
-        """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`."""
-        check_options(d, {f.name for f in dataclasses.fields(cls)}, "ModelConfig")
+        """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`.
+
+        ``arch="hybrid"`` gives a :class:`nnfmu.hybrid.HybridConfig` (imported on demand:
+        the hybrid package builds on this one).
+        """
+        if cls is ModelConfig and isinstance(d, Mapping) and d.get("arch") == HYBRID_ARCH:
+            from nnfmu.hybrid.config import HybridConfig
+
+            return HybridConfig.from_dict(d)
+        check_options(d, {f.name for f in dataclasses.fields(cls)}, cls.__name__)
         return cls(**dict(d))
 
     def replace(self, **changes) -> "ModelConfig":

@@ -6,7 +6,7 @@ from typing import Mapping
 
 from nnfmu.errors import ShapeError
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import ModelConfig
+from nnfmu.models.config import HYBRID_ARCH, ModelConfig
 from nnfmu.models.mlp import MLPStepModel
 from nnfmu.models.recurrent import RecurrentStepModel
 from nnfmu.models.tcn import TCNStepModel
@@ -21,7 +21,7 @@ MODEL_CLASSES: dict[str, type[StepModel]] = {
 
 
 def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm=None) -> StepModel:
-    """Build a freshly initialised network.
+    """Build a freshly initialised network (or hybrid model, for a :class:`nnfmu.hybrid.HybridConfig`).
 
     Parameters
     ----------
@@ -36,7 +36,12 @@ def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm
         config = ModelConfig.from_dict(config)
     if not isinstance(config, ModelConfig):
         raise ShapeError(f"expected a ModelConfig or a dict, got {type(config).__name__}")
-    model = MODEL_CLASSES[config.arch](config, meta)
+    if config.arch == HYBRID_ARCH:  # physics + correction; the hybrid package builds on this one
+        from nnfmu.hybrid.model import HybridStepModel
+
+        model = HybridStepModel(config, meta)
+    else:
+        model = MODEL_CLASSES[config.arch](config, meta)
     if norm is not None:
         model.set_normalisation(norm)
     return model
