@@ -30,7 +30,7 @@ import torch
 
 from nnfmu.cosim import evaluate
 from nnfmu.export import build_fmu
-from nnfmu.export.to_casadi import casadi_model
+from nnfmu.export import casadi_model
 from nnfmu.hybrid import HybridConfig, casadi_to_torch, physics_system
 from nnfmu.models import ModelConfig
 from nnfmu.physics import ValveParams, generate_dataset, valve_system

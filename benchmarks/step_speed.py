@@ -50,7 +50,7 @@ def make_network(arch: str, seed: int = 0):
 
 def casadi_model_of(network):
     """The network as a CasadiModel, through the exporter (issue 4, item 1)."""
-    from nnfmu.export.to_casadi import casadi_model
+    from nnfmu.export import casadi_model
 
     return casadi_model(network)
 

@@ -42,6 +42,7 @@ _LAZY = {
     "valve_system": "nnfmu.physics",
     "arm_system": "nnfmu.physics",
     "sx_to_torch": "nnfmu.hybrid",
+    "HybridConfig": "nnfmu.hybrid",
     "identify_linear": "nnfmu.linear",
     "LinearModel": "nnfmu.linear",
     "load_linear": "nnfmu.linear",

@@ -68,7 +68,7 @@ def test_exported_checkpoint_equals_the_torch_model(tmp_path, capsys, checkpoint
     assert export_main([str(checkpoints[arch]), "-o", str(out), "--fmi-version", str(version)]) == 0
     assert validate_fmu(str(out)) == []
     network = load_model(checkpoints[arch])
-    from nnfmu.export.to_casadi import casadi_model
+    from nnfmu.export import casadi_model
 
     model = casadi_model(network)
     rng = np.random.default_rng(0)

@@ -10,7 +10,7 @@ import torch
 
 from nnfmu.data import Trajectories
 from nnfmu.errors import ConfigError, DataFileError, ShapeError, UnknownOptionError
-from nnfmu.export.to_casadi import casadi_model, to_casadi
+from nnfmu.export import casadi_model, to_casadi
 from nnfmu.hybrid import HybridConfig, HybridStepModel, load_physics_params
 from nnfmu.models import build_model, load_model, save_checkpoint
 from nnfmu.physics import ArmParams, ValveParams, arm_system, valve_system

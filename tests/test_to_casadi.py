@@ -8,7 +8,7 @@ import torch
 from torch import nn
 
 from nnfmu.errors import ExportError
-from nnfmu.export.to_casadi import casadi_model, to_casadi
+from nnfmu.export import casadi_model, to_casadi
 from nnfmu.models import ARCHS, ModelConfig, RecurrentStepModel, build_model, load_model, save_checkpoint
 from nnfmu.training import TrainConfig, train
 

@@ -55,7 +55,7 @@ def export_checkpoint(args: argparse.Namespace) -> int:
     if args.name is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", args.name):
         raise ConfigError(f"--name must be an ASCII C identifier (letters, digits, '_'), got {args.name!r}")
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
-    from nnfmu.export.to_casadi import casadi_model
+    from nnfmu.export import casadi_model
 
     model = casadi_model(network, name=args.name)
     out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")

@@ -6,6 +6,8 @@
 
 ``python -m nnfmu.export model.pt -o model.fmu`` is the command line.
 Names are imported on first use so that ``import nnfmu.export`` does not import torch.
+(The torch part lives in :mod:`nnfmu.export.networks`: a submodule named ``to_casadi`` would
+shadow the function of that name once imported.)
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ from __future__ import annotations
 import importlib
 
 _LAZY = {
-    "to_casadi": "nnfmu.export.to_casadi",
-    "casadi_model": "nnfmu.export.to_casadi",
+    "to_casadi": "nnfmu.export.networks",
+    "casadi_model": "nnfmu.export.networks",
     "build_fmu": "nnfmu.export.fmu",
     "BuildOptions": "nnfmu.export.fmu",
 }
