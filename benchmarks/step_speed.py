@@ -7,6 +7,9 @@ For each architecture (GRU first) this builds a network with hidden size 64,
 - the FMU's step time in C: ``benchmarks/c/fmu_step_driver.c`` dlopens the
   FMU binary and loops fmi2SetReal + fmi2DoStep(Ts) + fmi2GetReal (no Python per step);
 - torch eager: a Python loop over ``model.step`` at batch 1 (float32, no grad);
+  for the GRU also a bare ``nn.GRUCell`` + ``nn.Linear`` loop (no normalisation,
+  no skip, no state packing): the least any eager step can cost, so the
+  speed-up over torch is reported against both;
 - for the GRU, ``benchmarks/c/gru_hand.c``: a plain hand-written C step of the
   same network, compiled at the FMU's flags and at ``-march=x86-64-v3``;
 - the export time (code generation + compile + zip) of each FMU.
@@ -65,6 +68,23 @@ def torch_us_per_step(network, steps: int, repeats: int) -> float:
             t0 = time.perf_counter()
             for k in range(steps):
                 x, _ = network.step(x, u[k:k + 1])
+            best = min(best, (time.perf_counter() - t0) / steps * 1e6)
+    return best
+
+
+def bare_gru_us_per_step(network, steps: int, repeats: int) -> float:
+    """Eager time of a plain ``nn.GRUCell`` + ``nn.Linear`` step of the same sizes (batch 1, float32)."""
+    hidden = network.config.hidden
+    cell, head = torch.nn.GRUCell(4, hidden), torch.nn.Linear(hidden, 2)
+    xs = torch.randn(steps, 1, 4)
+    best = np.inf
+    with torch.no_grad():
+        for _ in range(repeats):
+            h = torch.zeros(1, hidden)
+            t0 = time.perf_counter()
+            for k in range(steps):
+                h = cell(xs[k], h)
+                head(h)
             best = min(best, (time.perf_counter() - t0) / steps * 1e6)
     return best
 
@@ -156,6 +176,9 @@ def main(argv=None) -> None:
                 fmu_us = fmu_us if label else us
                 print(f"{arch + '64 FMU' + label:<22}{seconds:>9.2f}{us:>9.2f}{eager:>10.1f}{eager / us:>11.1f}  {y}")
             if arch == "gru":
+                bare = bare_gru_us_per_step(network, args.steps, max(2, args.repeats // 3))
+                print(f"{'gru64 torch GRUCell':<22}{'':>9}{'':>9}{bare:>10.1f}{bare / fmu_us:>11.1f}"
+                      "  (bare nn.GRUCell + nn.Linear loop, the eager floor)")
                 for label, (us, y) in hand_gru(network, work, args.steps, args.repeats).items():
                     print(f"{'gru64 hand C ' + label:<22}{'':>9}{us:>9.2f}{'':>10}{'':>11}  {y}"
                           f"   FMU/hand = {fmu_us / us:.2f}")
