@@ -142,6 +142,24 @@ def test_with_validation_many_and_single_trajectories():
     assert one.train.lengths.tolist() == [80] and one.valid.lengths.tolist() == [20]
 
 
+def test_measurement_noise_is_seeded_scaled_per_output_and_recorded():
+    rng = np.random.default_rng(2)
+    y = rng.normal(size=(40, 500, 2)) * np.array([1e-3, 2e5])  # outputs of very different scales
+    ds = from_arrays(Ts=1.0, u_train=rng.normal(size=(40, 500, 1)), y_train=y,
+                     u_test=rng.normal(size=(3, 200, 1)), y_test=rng.normal(size=(3, 200, 2)))
+    noisy = ds.with_measurement_noise(0.05, seed=7)
+    assert noisy.with_measurement_noise(0.0).train.y[0].tobytes() == noisy.train.y[0].tobytes()
+    again = ds.with_measurement_noise(0.05, seed=7)
+    assert all(np.array_equal(a, b) for a, b in zip(noisy.test.y, again.test.y))
+    assert all(np.array_equal(a, b) for a, b in zip(noisy.train.u, ds.train.u))  # inputs stay exact
+    noise = np.concatenate(noisy.train.y) - np.concatenate(ds.train.y)
+    ratio = noise.std(axis=0) / (0.05 * np.concatenate(ds.train.y).std(axis=0))
+    np.testing.assert_allclose(ratio, 1.0, atol=0.02)
+    assert noisy.source["measurement_noise"]["fraction_of_train_std"] == 0.05
+    with pytest.raises(DataError, match=r"measurement noise must be a fraction .* in \[0, 1\)"):
+        ds.with_measurement_noise(5.0)
+
+
 def test_windows_never_straddle_trajectories():
     ds = _ragged()
     w = ds.train.windows(10, stride=5)
