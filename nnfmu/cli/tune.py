@@ -1,0 +1,109 @@
+"""``nnfmu tune --data DIR --arch A [--strategy S] [--address ADDR] [--samples N] [--max-minutes M] [--out best.json]``.
+
+Grid search of one architecture's hyperparameters on Ray Tune (the optional
+extra ``tune``), as the paper did. The base configuration and the grid come
+from the budget table of the dataset's system (:mod:`nnfmu.study.budgets`);
+``--grid`` replaces the grid. Prints the trials, writes the best
+hyperparameters as JSON and the ``nnfmu train`` line that uses them.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+_TRAIN_FLAGS = {"hidden": "--hidden", "layers": "--layers", "window": "--window", "dropout": "--dropout",
+                "lr": "--lr", "weight_decay": "--weight-decay", "clip": "--clip", "batch_size": "--batch-size",
+                "truncate": "--truncate"}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("tune", help="grid-search an architecture's hyperparameters on Ray Tune (extra 'tune')",
+                       description=__doc__.split("\n\n", 1)[1].replace("\n", " "))
+    p.add_argument("--data", required=True, help="dataset folder")
+    p.add_argument("--arch", required=True, choices=["mlp", "rnn", "lstm", "gru", "tcn"])
+    p.add_argument("--strategy", choices=["parallel", "series-parallel"], default="parallel",
+                   help="training strategy of every trial (default parallel)")
+    p.add_argument("--address", help="address of a running Ray cluster (default: start a local instance)")
+    p.add_argument("--cpus", type=int, help="CPUs of the local Ray instance (default: all); one per trial")
+    p.add_argument("--samples", type=int, default=1,
+                   help="repetitions of every grid point with other seeds (default 1)")
+    p.add_argument("--max-minutes", type=float, help="wall-clock cap of each trial in minutes (default: the budget's)")
+    p.add_argument("--epochs", type=int, help="maximum epochs of each trial (default: the budget's)")
+    p.add_argument("--patience", type=int, help="early-stopping patience of each trial (default: the budget's)")
+    p.add_argument("--budget", choices=["smoke", "quick", "paper"], default="quick",
+                   help="where the base configuration and the grid come from (default quick)")
+    p.add_argument("--system", choices=["valve", "arm", "robot"],
+                   help="system of the budget table (default: read from the dataset's source)")
+    p.add_argument("--grid", nargs="+", metavar="FIELD=V1,V2", help="grid to search instead of the budget's, "
+                   "e.g. --grid hidden=16,32 lr=0.001,0.003")
+    p.add_argument("--seed", type=int, default=0, help="training seed of the first repetition (default 0)")
+    p.add_argument("--storage",
+                   help="folder for Ray's trial records (default ~/ray_results; on a cluster, a shared one)")
+    p.add_argument("--out", default="best.json", help="where to write the best hyperparameters (default best.json)")
+    p.set_defaults(func=_run)
+
+
+def parse_grid(items: list[str]) -> dict[str, tuple]:
+    """``["hidden=16,32", "lr=1e-3,3e-3"]`` -> ``{"hidden": (16, 32), "lr": (0.001, 0.003)}``."""
+    import dataclasses
+    import typing
+
+    from nnfmu.errors import ConfigError, check_options
+    from nnfmu.study import Hyper
+
+    types = typing.get_type_hints(Hyper)
+    grid = {}
+    for item in items:
+        name, sep, values = item.partition("=")
+        if not sep or not values:
+            raise ConfigError(f"--grid expects FIELD=V1,V2,..., got {item!r}")
+        check_options({name: None}, {f.name for f in dataclasses.fields(Hyper)}, "--grid")
+        convert = float if types[name] is float else int
+        try:
+            grid[name] = tuple(None if v == "none" else convert(v) for v in values.split(","))
+        except ValueError as exc:
+            raise ConfigError(f"--grid {name}: {exc}; give {convert.__name__} values separated by commas") from exc
+    return grid
+
+
+def _system(args, ds) -> str:
+    from nnfmu.errors import ConfigError
+
+    if args.system:
+        return args.system
+    source = ds.source
+    if source.get("kind") == "robot-benchmark":
+        return "robot"
+    if source.get("system") in ("valve", "arm"):
+        return source["system"]
+    raise ConfigError(f"cannot tell which system {args.data} holds (its source names none); pass --system "
+                      "valve|arm|robot to choose the base configuration and the grid")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from nnfmu.data import load_dataset
+    from nnfmu.study import TuneSettings, get_budget, require_ray, tune_architecture
+
+    require_ray()  # before loading data: a missing extra is the first thing to say
+    ds = load_dataset(args.data)
+    budget = get_budget(_system(args, ds), args.budget)
+    grid = parse_grid(args.grid) if args.grid else budget.grid(args.arch)
+    settings = TuneSettings(epochs=args.epochs or budget.tune_epochs,
+                            patience=budget.tune_patience if args.patience is None else args.patience,
+                            max_minutes=args.max_minutes or budget.tune_max_minutes, samples=args.samples,
+                            seed=args.seed)
+    result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
+                               settings=settings, address=args.address, num_cpus=args.cpus, storage=args.storage,
+                               progress=True)
+    print(f"\n{len(result.trials)} trials of {args.arch} ({args.strategy}); best validation free-run NRMSE "
+          f"{result.best_valid_nrmse:.4f} with {result.best.to_dict()}")
+    for row in sorted(result.trials, key=lambda r: (r["best_valid_nrmse"] is None, r["best_valid_nrmse"] or 0)):
+        point = ", ".join(f"{k}={row[k]}" for k in sorted(grid))
+        score = "diverged" if row["best_valid_nrmse"] is None else f"{row['best_valid_nrmse']:.4f}"
+        print(f"  {point or 'base'} (repeat {row['repeat']}): {score} after {row['epochs']} epochs")
+    print(f"wrote {result.save(args.out)}")
+    flags = " ".join(f"{_TRAIN_FLAGS[k]} {v}" for k, v in result.best.to_dict().items()
+                     if k in _TRAIN_FLAGS and v is not None)
+    print(f"train with: nnfmu train --data {args.data} --arch {args.arch} --strategy {args.strategy} {flags} "
+          "--out model.pt")
+    return 0

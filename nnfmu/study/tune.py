@@ -1,0 +1,246 @@
+"""Hyperparameter grid search on Ray Tune, as the paper did (``nnfmu tune`` and ``nnfmu reproduce --tune``).
+
+Every trial trains one network with :func:`nnfmu.training.train` and reports
+the validation free-run NRMSE to Tune after every epoch (the metric early
+stopping uses too). The grid spans a few fields of :class:`~nnfmu.study.Hyper`
+around an architecture's base configuration; every grid point is repeated
+``samples`` times with different training seeds, and the point with the lowest
+mean best-validation NRMSE wins.
+
+Ray is the optional extra ``tune`` (``pip install "nnfmu[tune]"``, or
+``pip install "ray[tune]"``). By default a local Ray instance is started
+(``ray.init(num_cpus=..., include_dashboard=False)``) and stopped again; with
+``address`` the search runs on an existing cluster, whose workers must have
+nnfmu installed. The dataset travels to the workers through Ray's object
+store, so no shared file system is needed for the data.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import itertools
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from nnfmu.data import Dataset
+from nnfmu.errors import ConfigError, NnfmuError, TrainingError
+from nnfmu.study.budgets import Hyper
+from nnfmu.study.cells import write_text_atomic
+from nnfmu.training import STRATEGIES
+
+METRIC = "best_valid_nrmse"
+
+
+class MissingExtraError(NnfmuError, ImportError):
+    """An optional dependency (an extra of the nnfmu package) is not installed."""
+
+
+def require_ray():
+    """Import Ray Tune, or raise :class:`MissingExtraError` naming the extra to install."""
+    try:
+        import ray
+        from ray import tune
+    except ImportError as exc:
+        raise MissingExtraError(
+            f"hyperparameter search needs Ray Tune, which is not installed ({exc}); install the optional extra "
+            "with: pip install \"nnfmu[tune]\" (or pip install \"ray[tune]\")"
+        ) from exc
+    return ray, tune
+
+
+@dataclass(frozen=True, kw_only=True)
+class TuneSettings:
+    """How long each trial trains and how often each grid point is tried.
+
+    Attributes
+    ----------
+    epochs, patience : int
+        Maximum epochs and early-stopping patience of one trial.
+    max_minutes : float or None
+        Wall-clock cap of one trial, in minutes.
+    samples : int
+        Repetitions of every grid point, with training seeds ``seed, seed + 1, ...``.
+    seed : int
+    """
+
+    epochs: int = 10
+    patience: int = 5
+    max_minutes: float | None = None
+    samples: int = 1
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.samples, int) or self.samples < 1:
+            raise ConfigError(f"samples must be an integer >= 1, got {self.samples!r}")
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """The outcome of one search: the best hyperparameters and every trial's score.
+
+    ``trials`` holds one dict per trial: the grid values, the repeat index, the best validation
+    NRMSE and the epochs it ran.
+    """
+
+    arch: str
+    strategy: str
+    best: Hyper
+    best_valid_nrmse: float
+    trials: list = field(default_factory=list)
+    ray_version: str = ""
+
+    def to_json(self) -> dict:
+        return {"format": "nnfmu-tune", "arch": self.arch, "strategy": self.strategy, "best": self.best.to_dict(),
+                "best_valid_nrmse": _finite_or_none(self.best_valid_nrmse), "ray_version": self.ray_version,
+                "trials": self.trials}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        return write_text_atomic(Path(path), json.dumps(self.to_json(), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "TuneResult":
+        from nnfmu.errors import DataFileError
+
+        try:
+            doc = json.loads(Path(path).read_text())
+            score = doc["best_valid_nrmse"]
+            return cls(doc["arch"], doc["strategy"], Hyper.from_dict(doc["best"]),
+                       math.inf if score is None else float(score), doc.get("trials", []), doc.get("ray_version", ""))
+        except (OSError, ValueError, KeyError) as exc:
+            raise DataFileError(f"{path} is not a tune result written by nnfmu ({exc}); "
+                                "run 'nnfmu tune' again") from exc
+
+
+def _finite_or_none(x: float):
+    return float(x) if math.isfinite(x) else None
+
+
+def grid_points(grid: Mapping[str, Sequence]) -> list[dict]:
+    """Every combination of the grid's values (one dict each); a grid with no fields has one empty point."""
+    keys = sorted(grid)
+    return [dict(zip(keys, values)) for values in itertools.product(*(tuple(grid[k]) for k in keys))]
+
+
+def check_grid(arch: str, base: Hyper, grid: Mapping[str, Sequence], n_u: int, n_y: int) -> None:
+    """Build every grid point's configs now, so that a bad value fails before Ray starts."""
+    for point in grid_points(grid):
+        try:
+            base.replace(**point).model_config(arch, n_u, n_y)
+        except NnfmuError as exc:
+            raise ConfigError(f"tune grid point {point} is invalid for {arch}: {exc}") from exc
+
+
+def _trial(config: dict, dataset: Dataset | None = None, job: dict | None = None) -> None:
+    """One Ray Tune trial: train with the grid point's hyperparameters, report every epoch."""
+    import torch
+    from ray import tune
+
+    from nnfmu.training import train
+
+    torch.set_num_threads(1)  # one CPU per trial
+    point = {k: v for k, v in config.items() if k != "repeat"}
+    hyper = Hyper.from_dict(job["base"]).replace(**point)
+    settings = TuneSettings(**job["settings"])
+    train_config = hyper.train_config(strategy=job["strategy"], epochs=settings.epochs, patience=settings.patience,
+                                      seed=settings.seed + int(config["repeat"]), max_minutes=settings.max_minutes)
+
+    def report(epoch: int, metrics: dict) -> None:
+        tune.report({"epoch": epoch, "valid_nrmse": _finite(metrics["valid_nrmse"]),
+                     METRIC: _finite(metrics["best_valid_nrmse"])})
+
+    try:
+        train(dataset, hyper.model_config(job["arch"], dataset.n_u, dataset.n_y), train_config, callback=report)
+    except TrainingError:  # a diverging configuration is a bad score, not a failed search
+        tune.report({"epoch": 0, "valid_nrmse": math.inf, METRIC: math.inf})
+
+
+def _finite(x: float) -> float:
+    return float(x) if math.isfinite(x) else math.inf
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None = None, num_cpus: int | None = None):
+    """Connect to the cluster at ``address`` or start a local Ray instance; stop what was started here."""
+    ray, _ = require_ray()
+    started = False
+    if not ray.is_initialized():
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, log_to_driver=False)
+        started = True
+    try:
+        yield ray
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel", base: Hyper | None = None,
+                      grid: Mapping[str, Sequence] | None = None, settings: TuneSettings | None = None,
+                      address: str | None = None, num_cpus: int | None = None,
+                      storage: str | os.PathLike | None = None, progress: bool = False) -> TuneResult:
+    """Grid-search the hyperparameters of ``arch`` trained with ``strategy`` on Ray Tune.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Needs a 'valid' split, or one is carved out of train by the trainer (the same in every trial).
+    base : Hyper
+        The base configuration; grid values replace its fields. Default ``Hyper()``.
+    grid : mapping field -> values
+        E.g. ``{"hidden": (16, 32), "lr": (1e-3, 3e-3)}``; empty: only the base configuration.
+    settings : TuneSettings
+        Trial length, repetitions and seed.
+    address : str, optional
+        Address of a running Ray cluster (``ray start --head`` prints it); default: a local instance.
+    num_cpus : int, optional
+        CPUs of the local instance (default: all); each trial takes one.
+    storage : path, optional
+        Folder for Ray's trial records (default ``~/ray_results``); on a cluster, a shared one.
+    """
+    ray, tune = require_ray()
+    if strategy not in STRATEGIES:
+        raise ConfigError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
+    base, grid, settings = base or Hyper(), dict(grid or {}), settings or TuneSettings()
+    check_grid(arch, base, grid, dataset.n_u, dataset.n_y)
+    space = {k: tune.grid_search(list(v)) for k, v in grid.items()}
+    space["repeat"] = tune.grid_search(list(range(settings.samples)))
+    job = {"arch": arch, "strategy": strategy, "base": base.to_dict(), "settings": dataclasses.asdict(settings)}
+    trainable = tune.with_resources(tune.with_parameters(_trial, dataset=dataset, job=job), {"cpu": 1})
+    run_config = tune.RunConfig(name=f"nnfmu-{arch}-{strategy}", verbose=1 if progress else 0,
+                                storage_path=None if storage is None else str(Path(storage).resolve()))
+    with ray_session(address, num_cpus):
+        results = tune.Tuner(trainable, param_space=space, run_config=run_config,
+                             tune_config=tune.TuneConfig(metric=METRIC, mode="min", reuse_actors=True)).fit()
+        trials = [_trial_row(r, grid) for r in results]
+    return _best(arch, strategy, base, grid, trials, ray.__version__)
+
+
+def _trial_row(result, grid: Mapping) -> dict:
+    metrics = result.metrics or {}
+    score = metrics.get(METRIC, math.inf)
+    row = {k: result.config[k] for k in sorted(grid)}
+    row.update(repeat=int(result.config["repeat"]), best_valid_nrmse=_finite_or_none(_finite(score)),
+               epochs=int(metrics.get("epoch", 0)), error=None if result.error is None else str(result.error))
+    return row
+
+
+def _best(arch: str, strategy: str, base: Hyper, grid: Mapping, trials: list[dict], version: str) -> TuneResult:
+    scores: dict[tuple, list[float]] = {}
+    for row in trials:
+        key = tuple(row[k] for k in sorted(grid))
+        score = row["best_valid_nrmse"]
+        scores.setdefault(key, []).append(math.inf if score is None else score)
+    if not scores:
+        raise TrainingError(f"the search for {arch} {strategy} produced no trial results; see Ray's log above")
+    key, values = min(scores.items(), key=lambda kv: float(np.mean(kv[1])))  # ties: first grid point
+    best = base.replace(**dict(zip(sorted(grid), key)))
+    return TuneResult(arch, strategy, best, float(np.mean(values)), trials, version)
