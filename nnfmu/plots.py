@@ -66,9 +66,10 @@ def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.Path
             ax.plot(t, ev.predictions[idx][:, j], lw=1.0, label=label)
         ax.set_ylabel(f"{ch.name} [{ch.unit}]")
     axes[-1].set_xlabel(t_label)
-    fig.legend(loc="upper center", ncol=min(4, len(evaluations) + 1), fontsize="small", frameon=False)
+    fig.legend(loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=min(4, len(evaluations) + 1), fontsize="small",
+               frameon=False)
     fig.suptitle(f"{split} trajectory {idx}: predicted vs measured (NRMSE in brackets)", y=0.995, fontsize="medium")
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.tight_layout(rect=(0, 0, 1, 0.92))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.png")
