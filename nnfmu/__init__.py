@@ -4,7 +4,9 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
 
 - data: :class:`Dataset`, :class:`Channel`, :class:`Trajectories`, :func:`load_dataset`,
   :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
-- scoring: :func:`nrmse`
+- scoring: :func:`nrmse`; :func:`evaluate` (co-simulate FMUs in fmpy on a dataset split and score them)
+- export: :func:`casadi_model` (a trained network as CasADi ``(init, step)``), :func:`build_fmu`
+- the study: :func:`reproduce` (``nnfmu reproduce``), :func:`run_demo` (``nnfmu demo``)
 - models and training: :class:`ModelConfig`, :class:`TrainConfig`, :func:`train`,
   :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
 - linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
@@ -46,6 +48,11 @@ _LAZY = {
     "identify_linear": "nnfmu.linear",
     "LinearModel": "nnfmu.linear",
     "load_linear": "nnfmu.linear",
+    "evaluate": "nnfmu.cosim",
+    "casadi_model": "nnfmu.export.networks",
+    "build_fmu": "nnfmu.export.fmu",
+    "reproduce": "nnfmu.study",
+    "run_demo": "nnfmu.study",
 }
 
 __all__ = sorted(_LAZY)

@@ -173,3 +173,5 @@ def test_windows_never_straddle_trajectories():
 def test_public_api_reexported():
     assert nnfmu.Dataset is Dataset and nnfmu.load_dataset is load_dataset
     assert "nrmse" in dir(nnfmu)
+    for name in nnfmu.__all__:  # every advertised name resolves, so the lazy table has no typo
+        assert getattr(nnfmu, name) is not None, name
