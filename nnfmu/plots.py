@@ -1,7 +1,9 @@
 """Figures in the style of the paper's Figs. 2 and 3: inputs on top, predicted vs measured outputs below.
 
 Measured outputs are dashed black lines; each model is a coloured line
-labelled with its NRMSE on that trajectory.
+labelled with its NRMSE on that trajectory. The output axes are scaled to the
+measurement (with a margin), so that one model drifting far away does not
+flatten the others; its line leaves the axes and its legend entry says so.
 """
 
 from __future__ import annotations
@@ -19,6 +21,13 @@ def representative_index(evaluations: Sequence) -> int:
     """The trajectory whose mean NRMSE over all models is the median one (the 'typical' case)."""
     scores = np.mean([ev.result.per_trajectory for ev in evaluations], axis=0)
     return int(np.argsort(scores)[len(scores) // 2])
+
+
+def _measured_limits(y: np.ndarray, margin: float = 0.5) -> tuple[float, float]:
+    """Axis limits: the measured range widened by ``margin`` times its width on each side."""
+    lo, hi = float(np.min(y)), float(np.max(y))
+    pad = margin * (hi - lo) if hi > lo else max(abs(lo), 1.0) * 0.1
+    return lo - pad, hi + pad
 
 
 def _time_axis(n: int, Ts: float) -> tuple[np.ndarray, str]:
@@ -58,12 +67,17 @@ def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.Path
             axes[row].plot(t, u[:, j], color="tab:gray", lw=1.0)
             axes[row].set_ylabel(f"{ch.name} [{ch.unit}]")
             row += 1
+    limits = [_measured_limits(y[:, j]) for j in range(dataset.n_y)]
+    leaves = [any(np.any((ev.predictions[idx][:, j] < lo) | (ev.predictions[idx][:, j] > hi))
+                  for j, (lo, hi) in enumerate(limits)) for ev in evaluations]
     for j, ch in enumerate(dataset.outputs):
         ax = axes[row + j]
         ax.plot(t, y[:, j], "k--", lw=1.2, label="measured" if j == 0 else None)
-        for ev in evaluations:
-            label = f"{ev.name} ({ev.result.per_trajectory[idx]:.3f})" if j == 0 else None
+        for ev, off_axes in zip(evaluations, leaves):
+            note = ", leaves the axes" if off_axes else ""
+            label = f"{ev.name} ({ev.result.per_trajectory[idx]:.3f}{note})" if j == 0 else None
             ax.plot(t, ev.predictions[idx][:, j], lw=1.0, label=label)
+        ax.set_ylim(*limits[j])
         ax.set_ylabel(f"{ch.name} [{ch.unit}]")
     axes[-1].set_xlabel(t_label)
     fig.legend(loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=min(4, len(evaluations) + 1), fontsize="small",

@@ -118,3 +118,31 @@ def test_evaluate_cli_prints_table_writes_json_and_plot(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "nnfmu", "evaluate", "--data", str(tmp_path / "data"),
                           str(tmp_path / "missing.fmu")], capture_output=True, text=True)
     assert bad.returncode == 2 and "missing.fmu not found" in bad.stderr
+
+
+def test_plot_axes_follow_the_measurement_when_a_model_drifts_away(tmp_path, monkeypatch):
+    """A diverging baseline must not flatten the others: axes keep to the measured range, the label says so."""
+    import matplotlib.figure
+
+    from nnfmu.cosim import Evaluation
+    from nnfmu.plots import plot_trajectory
+
+    ds, _ = _dataset(perturbation=0.02, n_traj=1)
+    y = ds.test.y[0]
+    good, drift = y * 1.01, y + 1e3 * np.linspace(0, 1, len(y))[:, None]
+    evs = [Evaluation(name, tmp_path / f"{name}.fmu", nrmse(y, p), [p]) for name, p in (("good", good), ("drift", drift))]
+    saved = []
+    real_savefig = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, *a, **k: (saved.append(fig), real_savefig(fig, *a, **k))[1])
+    png = plot_trajectory(ds, evs, tmp_path / "fig.png", index=0)
+    assert png.is_file() and len(saved) == 1
+    fig = saved[0]
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(t.startswith("good (") and "leaves" not in t for t in labels)
+    assert any(t.startswith("drift (") and t.endswith(", leaves the axes)") for t in labels)
+    output_axes = fig.axes[-2:]  # pos, vel below the input
+    for j, ax in enumerate(output_axes):
+        lo, hi = ax.get_ylim()
+        width = y[:, j].max() - y[:, j].min()
+        assert lo == pytest.approx(y[:, j].min() - 0.5 * width) and hi == pytest.approx(y[:, j].max() + 0.5 * width)
