@@ -212,6 +212,12 @@ _VALVE = _per_arch(
     mlp=Hyper(hidden=64, layers=2, window=8), rnn=Hyper(hidden=32), lstm=Hyper(hidden=32),
     gru=Hyper(hidden=32), tcn=Hyper(hidden=32, layers=3),
 )
+# 'quick' trains on windows of 100 samples (multiple shooting from measured states): at an equal number of
+# epochs it gives 5x the optimiser steps of whole 500-sample trajectories for the same compute. Measured (seed 0,
+# 5 % noise, free-run test NRMSE sp/p): whole trajectories MLP 0.143/0.130, RNN 0.287/0.191, LSTM 0.195/0.103,
+# GRU 0.154/0.112, TCN 0.111/0.163 (14.5 min); windows of 100: 0.150/0.108, 0.215/0.100, 0.098/0.094,
+# 0.113/0.100, 0.119/0.109 (11 min). 'paper' keeps whole trajectories, as the paper did.
+_VALVE_QUICK = {a: h.replace(truncate=100) for a, h in _VALVE.items()}
 # Robot and arm: few unique trajectories (the paper notes overfitting), so dropout and more weight decay.
 _ROBOT = _per_arch(
     mlp=Hyper(hidden=64, layers=2, window=8, dropout=0.1, weight_decay=1e-3, batch_size=8),
@@ -235,7 +241,7 @@ _LINEAR_SMOKE = {"refine": False, "max_order": 8}
 
 
 def _budgets(full_size: str | None, small_size: str | None, hyper: dict, linear_quick: dict, linear_paper: dict,
-             noise: float = 0.0) -> dict[str, Budget]:
+             noise: float = 0.0, quick_hyper: dict | None = None) -> dict[str, Budget]:
     smoke_data = {"data_size": small_size} if small_size else {"data_size": None, "max_train": 6}
     smoke_data["noise"] = noise
     return {
@@ -244,7 +250,8 @@ def _budgets(full_size: str | None, small_size: str | None, hyper: dict, linear_
                         tune_grid=_SMOKE_GRID, tune_epochs=1, tune_patience=0),
         "quick": Budget(name="quick", description="full-size data, preset hyperparameters, up to 40 epochs "
                                                   "(3 min cap per training)",
-                        data_size=full_size, noise=noise, epochs=40, patience=10, max_minutes=3.0, hyper=hyper,
+                        data_size=full_size, noise=noise, epochs=40, patience=10, max_minutes=3.0,
+                        hyper=quick_hyper or hyper,
                         linear=linear_quick, tune_grid=_quick_grid(), tune_epochs=10, tune_patience=5,
                         tune_max_minutes=2.0),
         "paper": Budget(name="paper", description="the paper's protocol: grid-searched hyperparameters, up to "
@@ -264,7 +271,7 @@ BUDGETS: Mapping[str, Mapping[str, Budget]] = MappingProxyType({
     # 3 minutes and changed nothing (0.5313 -> 0.5313).
     "valve": MappingProxyType({
         **_budgets("paper", "small", _VALVE, {"refine": False}, {"refine": True, "max_evaluations": 100},
-                   noise=VALVE_NOISE),
+                   noise=VALVE_NOISE, quick_hyper=_VALVE_QUICK),
         "demo": Budget(name="demo", description="nnfmu demo: a parallel and a series-parallel GRU at equal budgets "
                                                 "(20 epochs on windows of 100 samples) on the paper-size valve data",
                        data_size="paper", noise=VALVE_NOISE, archs=("gru",), epochs=20, patience=10,
