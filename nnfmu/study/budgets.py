@@ -10,15 +10,16 @@ budget      what it is for
 ``smoke``   the pipeline end to end in a few minutes on 2 cores: small data,
             tiny networks, 2 epochs. The numbers mean nothing.
 ``quick``   meaningful numbers in well under an hour on 2 cores: full-size
-            data, the preset hyperparameters, tens of epochs, early stopping
-            and a wall-clock cap per training.
+            data, the preset hyperparameters (valve: windows of 100
+            samples), tens of epochs, early stopping and a wall-clock cap
+            per training.
 ``paper``   the paper's protocol: full-size data, hyperparameters from a grid
             search (Ray Tune) per architecture and strategy, long training
             with early stopping on the validation free-run NRMSE. Hours.
 ``demo``    (valve only) ``nnfmu demo``: a parallel and a series-parallel GRU
             at equal budgets (the paper-size data, 20 epochs on windows of
             100 samples), sized so that the paper's finding shows; about
-            2.5 minutes on 2 cores.
+            2 minutes on 2 cores (1 min 55 s measured).
 ==========  ===============================================================
 
 Generated valve data get white measurement noise (:data:`VALVE_NOISE`, 5 % of
@@ -28,8 +29,9 @@ series-parallel training, which feeds them back. Measured on the demo preset
 (GRU-32, 20 epochs, seeds 0, 1, 2; free-run test NRMSE, parallel vs
 series-parallel): with 2 % noise 0.080/0.109, 0.092/0.100, 0.092/0.085 (series-
 parallel won once); with 5 % noise 0.105/0.153, 0.116/0.143, 0.110/0.154. With
-``quick`` and 2 % noise series-parallel still won for 2 of 5 architectures
-(seed 0; 4 of 5 without noise).
+``quick`` (seed 0, whole trajectories) series-parallel won for 4 of 5
+architectures without noise and 2 of 5 with 2 % noise; with 5 % noise and
+windows of 100 samples parallel wins for all 5 (figures at ``_VALVE_QUICK``).
 
 The preset hyperparameters (:class:`Hyper`, one per architecture) are the
 same for both strategies, so that a preset study compares the strategies at
