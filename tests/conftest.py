@@ -19,3 +19,13 @@ def valve_small_dir(valve_small, tmp_path_factory):
     from nnfmu.data import save_dataset
 
     return save_dataset(valve_small, tmp_path_factory.mktemp("data") / "valve_small")
+
+
+@pytest.fixture(scope="module")
+def one_thread():
+    """Torch on one thread for a module of tiny models: extra threads only add contention (and two
+    pytest processes would fight over the cores). Use with ``pytestmark = pytest.mark.usefixtures("one_thread")``."""
+    from nnfmu.models.base import torch_threads
+
+    with torch_threads(1):
+        yield

@@ -8,7 +8,6 @@ import sys
 
 import numpy as np
 import pytest
-import torch
 from fmpy.validation import validate_fmu
 
 from nnfmu.cli import main
@@ -20,12 +19,7 @@ from nnfmu.models import load_checkpoint, load_model
 WRONG_VALVE = {"k_s": 32500.0, "C_max": 4.2e-10, "d_c": 0.0}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

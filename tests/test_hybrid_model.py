@@ -19,13 +19,7 @@ from nnfmu.training import TrainConfig, train
 WRONG_VALVE = {"k_s": 1.3 * 25e3, "C_max": 0.7 * 6e-10, "d_c": 0.0}  # spring, orifice 30 % off, no stop damping
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """Hybrid steps are hundreds of tiny torch operations; extra intra-op threads only add contention."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

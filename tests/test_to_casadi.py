@@ -10,6 +10,7 @@ from torch import nn
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_model, to_casadi
 from nnfmu.models import ARCHS, ModelConfig, RecurrentStepModel, build_model, load_model, save_checkpoint
+from nnfmu.models.base import torch_threads
 from nnfmu.training import TrainConfig, train
 
 N_STEPS = 3500
@@ -26,15 +27,12 @@ def test_inputs(valve_small):
 @pytest.fixture(scope="module")
 def trained_models(valve_small):
     """Each architecture briefly trained (parallel) on a few valve trajectories: realistic weights."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
     data = valve_small.replace(splits={"train": valve_small.train.subset(range(8)),
                                        "valid": valve_small.train.subset([8]), "test": valve_small.test})
     cfg = TrainConfig(epochs=2, batch_size=8, truncate=30, lr=1e-2)
-    models = {arch: train(data, ModelConfig(arch=arch, n_u=2, n_y=2, hidden=8, layers=2), cfg).model
-              for arch in ARCHS}
-    torch.set_num_threads(before)
-    return models
+    with torch_threads(1):
+        return {arch: train(data, ModelConfig(arch=arch, n_u=2, n_y=2, hidden=8, layers=2), cfg).model
+                for arch in ARCHS}
 
 
 def assert_same_free_run(model, u, y0):

@@ -21,12 +21,7 @@ from nnfmu.training import STRATEGIES, TrainConfig
 QUICK = ["--epochs", "1", "--hidden", "8", "--truncate", "30", "--batch-size", "16", "--quiet"]
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

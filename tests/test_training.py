@@ -19,13 +19,7 @@ TINY = dict(hidden=8)
 FAST = dict(epochs=3, batch_size=8, truncate=40, lr=1e-2, patience=0)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """Tiny models train faster on one thread, and two pytest workers then do not fight over cores."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

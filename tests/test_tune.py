@@ -10,7 +10,7 @@ import pytest
 from nnfmu.cli import main
 from nnfmu.errors import ConfigError, UnknownOptionError
 from nnfmu.study import Hyper, MissingExtraError, TuneResult, get_budget, reproduce, require_ray
-from nnfmu.study.pipeline import torch_threads
+from nnfmu.models.base import torch_threads
 from nnfmu.study.tune import _best, check_grid
 
 

@@ -257,21 +257,21 @@ class StepModel(nn.Module):
         if not (np.isfinite(u).all() and np.isfinite(y0).all()):
             raise DataError("u or y0 has non-finite values; remove or interpolate them before simulating")
         model = copy.deepcopy(self).double().eval()
-        with torch.no_grad(), single_thread():
+        with torch.no_grad(), torch_threads(1):
             y = model(torch.from_numpy(u)[None], torch.from_numpy(y0)[None])[0]
         return y.numpy()
 
 
 @contextlib.contextmanager
-def single_thread():
-    """Run torch on one intra-op thread, then restore the previous count.
+def torch_threads(n: int = 1):
+    """Run torch on ``n`` intra-op threads inside the block, then restore the previous count.
 
-    A batch-1 free run is thousands of tiny operations; splitting each over
-    threads only adds synchronisation, which on a busy machine made a TCN
-    free run 80x slower (15.8 s against 0.19 s for 500 steps).
+    Small networks step through thousands of tiny operations; splitting each over
+    threads only adds synchronisation, which on a busy machine made a batch-1 TCN
+    free run 80x slower (15.8 s against 0.19 s for 500 steps). So one is the default.
     """
     before = torch.get_num_threads()
-    torch.set_num_threads(1)
+    torch.set_num_threads(n)
     try:
         yield
     finally:

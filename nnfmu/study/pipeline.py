@@ -194,6 +194,8 @@ class Study:
 
             require_ray()  # a missing extra is said before any work, not after the data are made
         self.check_manifest()
+        from nnfmu.models.base import torch_threads
+
         try:
             with torch_threads(self.budget.threads):
                 log = run_cells(self.cells(), echo=self.echo)
@@ -202,19 +204,6 @@ class Study:
             self._ray_started = False
         results = json.loads((self.out / "results.json").read_text())
         return StudyResult(self.out, log, results)
-
-
-@contextlib.contextmanager
-def torch_threads(n: int):
-    """Run torch on ``n`` threads inside the block (see :attr:`Budget.threads` for why one is the default)."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", data: str | Path | None = None,
