@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
+from nnfmu.atomic import write_atomic
 from nnfmu.data import Dataset
 
 
@@ -84,10 +85,7 @@ def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.Path
                frameon=False)
     fig.suptitle(f"{split} trajectory {idx}: predicted vs measured (NRMSE in brackets)", y=0.995, fontsize="medium")
     fig.tight_layout(rect=(0, 0, 1, 0.92))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    try:
+        return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"), suffix=".png")
+    finally:
+        plt.close(fig)

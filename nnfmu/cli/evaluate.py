@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
+
+from nnfmu.atomic import write_text_atomic
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,9 +42,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"data": str(args.data), "split": args.split, "Ts": ds.Ts,
                "models": [ev.to_json(ds.output_names) for ev in evaluations]}
-        tmp = Path(f"{args.json}.tmp")
-        tmp.write_text(json.dumps(doc, indent=2) + "\n")
-        os.replace(tmp, args.json)
+        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
         print(f"scores written to {args.json}")
     if args.plots:
         from nnfmu.plots import plot_trajectory

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import os
 import platform
 import shutil
 import sys
@@ -40,6 +39,7 @@ from importlib import resources
 from os import PathLike
 from pathlib import Path
 
+from nnfmu.atomic import write_atomic
 from nnfmu.errors import ConfigError, FmuBuildError
 from nnfmu.export import codegen, compiler, model_description
 from nnfmu.export.compiler import DEFAULT_FLAGS
@@ -189,12 +189,5 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
         raise FmuBuildError(f"the folder {str(out.parent)!r} for the FMU does not exist; create it first")
     with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
         _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options)
-        fd, partial = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent)
-        os.close(fd)
-        try:
-            _zip_tree(Path(tmp) / "fmu", Path(partial))
-            os.replace(partial, out)
-        except BaseException:
-            Path(partial).unlink(missing_ok=True)
-            raise
+        write_atomic(out, lambda partial: _zip_tree(Path(tmp) / "fmu", partial))
     return out

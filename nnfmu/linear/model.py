@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from nnfmu.atomic import write_text_atomic
 from nnfmu.data import Channel
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, ShapeError
 from nnfmu.linear.statespace import INIT_OPTIONS, StateSpace, free_run, init_gains
@@ -152,13 +152,8 @@ class LinearModel:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the model as JSON to ``path`` (via a temporary file, so nothing half-written remains)."""
         path = Path(path)
-        text = json.dumps(self.to_json(), indent=1) + "\n"
         try:
-            path.resolve().parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.resolve().parent)
-            with os.fdopen(fd, "w") as f:
-                f.write(text)
-            os.replace(tmp, path)
+            write_text_atomic(path, json.dumps(self.to_json(), indent=1) + "\n")
         except OSError as exc:
             raise DataFileError(f"cannot write the linear model to {path}: {exc}; choose a writable path") from exc
         return path

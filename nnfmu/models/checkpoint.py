@@ -26,6 +26,7 @@ from typing import Mapping
 
 import torch
 
+from nnfmu.atomic import write_atomic
 from nnfmu.errors import CheckpointError, DataFileError, NnfmuError
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
@@ -74,25 +75,11 @@ def save_checkpoint(
         "summary": dict(summary or {}),
         "resume": None if resume is None else dict(resume),
     }
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(payload, tmp)
-        os.replace(tmp, path)
+        return write_atomic(path, lambda tmp: torch.save(payload, tmp))
     except OSError as exc:
-        _remove(tmp)
         raise DataFileError(f"cannot write checkpoint {path}: {exc}; choose a writable --out path") from exc
-    except BaseException:
-        _remove(tmp)
-        raise
-    return path
 
-
-def _remove(tmp: Path) -> None:
-    try:
-        tmp.unlink(missing_ok=True)
-    except OSError:  # e.g. the parent is not a folder: then there is nothing to remove
-        pass
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict:

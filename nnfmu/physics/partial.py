@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nnfmu.atomic import write_atomic
+
 
 class PartialTrajectories:
     """Per-trajectory store for one generation request; ``folder=None`` disables it."""
@@ -48,9 +50,7 @@ class PartialTrajectories:
     def store(self, split: int, index: int, u: np.ndarray, y: np.ndarray) -> None:
         if self.folder is None:
             return
-        tmp = self.folder / f".{split}_{index}.tmp.npz"
-        np.savez(tmp, u=u, y=y)
-        os.replace(tmp, self._file(split, index))
+        write_atomic(self._file(split, index), lambda tmp: np.savez(tmp, u=u, y=y), suffix=".npz")
 
     def discard(self) -> None:
         """Remove the folder once the dataset is safely written."""

@@ -22,10 +22,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from nnfmu.atomic import write_text_atomic
 from nnfmu.errors import ConfigError, DataFileError
 from nnfmu.study import steps
 from nnfmu.study.budgets import SYSTEMS, Budget, Hyper, get_budget
-from nnfmu.study.cells import Cell, CellLog, run_cells, write_text_atomic
+from nnfmu.study.cells import Cell, CellLog, run_cells
 
 TrainCallback = Callable[[str, int, dict], None]
 

@@ -24,7 +24,7 @@ from nnfmu.errors import (
     TrainingError,
 )
 from nnfmu.study.budgets import Budget, Hyper
-from nnfmu.study.cells import write_atomic, write_text_atomic
+from nnfmu.atomic import write_atomic, write_text_atomic
 
 
 # ---- data ----------------------------------------------------------------------------------------

@@ -32,7 +32,7 @@ import numpy as np
 from nnfmu.data import Dataset
 from nnfmu.errors import ConfigError, NnfmuError, TrainingError
 from nnfmu.study.budgets import Hyper
-from nnfmu.study.cells import write_text_atomic
+from nnfmu.atomic import write_text_atomic
 from nnfmu.training import STRATEGIES
 
 METRIC = "best_valid_nrmse"
