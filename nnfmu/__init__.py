@@ -17,7 +17,7 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
 
 from __future__ import annotations
 
-import importlib
+from nnfmu._lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -58,13 +58,4 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'nnfmu' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_exports("nnfmu", globals(), _LAZY)

@@ -12,7 +12,7 @@ shadow the function of that name once imported.)
 
 from __future__ import annotations
 
-import importlib
+from nnfmu._lazy import lazy_exports
 
 _LAZY = {
     "to_casadi": "nnfmu.export.networks",
@@ -24,9 +24,4 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'nnfmu.export' has no attribute {name!r}")
+__getattr__, __dir__ = lazy_exports("nnfmu.export", globals(), _LAZY)
