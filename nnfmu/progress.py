@@ -29,9 +29,12 @@ def training_bar(epoch: int, epochs: int, max_minutes: float | None, *, desc: st
     if max_minutes is None:
         return tqdm(total=epochs, initial=min(epoch, epochs), disable=not progress, unit="epoch", desc=desc,
                     dynamic_ncols=True)
-    bar = tqdm(total=round(60.0 * max_minutes), disable=not progress, unit="s", desc=f"{desc} epoch {epoch}",
-               dynamic_ncols=True, smoothing=0,
-               bar_format="{desc} |{bar}| {elapsed} of the budget, {remaining} left{postfix}")
+    from tqdm import tqdm as text_bar
+
+    total = round(60.0 * max_minutes)
+    bar = tqdm(total=total, disable=not progress, unit="s", desc=f"{desc} epoch {epoch}", dynamic_ncols=True,
+               smoothing=0, bar_format="{desc} |{bar}| {remaining} left of " + text_bar.format_interval(total)
+               + " budget{postfix}")
     bar.budget_desc, bar.budget_start = desc, time.monotonic()
     return bar
 

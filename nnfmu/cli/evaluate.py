@@ -51,7 +51,9 @@ def format_table(evaluations, outputs) -> str:
                + [f"{v:.4f}" for v in ev.result.output_mean] for ev in evaluations]
     units = [f"{n} [{getattr(o, 'unit', '') or '-'}]" for n, o in zip(names, outputs)]
     rmse = [["model"] + units] + [[ev.name] + [f"{v:.4g}" for v in ev.result.rmse_output_mean] for ev in evaluations]
-    return "\n".join(_table(scores[0], scores[1:]) + ["", "RMSE per output, in its unit:"] + _table(rmse[0], rmse[1:]))
+    return "\n".join(["NRMSE and fit % (mean over outputs), then the NRMSE of each output:"]
+                     + _table(scores[0], scores[1:]) + ["", "RMSE of each output, in its unit:"]
+                     + _table(rmse[0], rmse[1:]))
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -80,8 +80,11 @@ def from_benchmark(
     Ts : sample time in s; default the records' ``sampling_time`` (which must agree).
     name : the benchmark's name, recorded in ``source``.
 
-    Returns a dataset whose ``init_window`` is the test records' largest
-    ``state_initialization_window_length`` (None if they give none).
+    Returns
+    -------
+    Dataset
+        Its ``init_window`` is the test records' largest ``state_initialization_window_length``
+        (None if they give none).
     """
     if test is None:
         if not (isinstance(train, (tuple, list)) and len(train) == 2):
@@ -93,7 +96,7 @@ def from_benchmark(
         splits["valid"] = _records(valid, "valid")
     arrays = {s: ([_column(r.u, f"{s} record {i} u") for i, r in enumerate(recs)],
                   [_column(r.y, f"{s} record {i} y") for i, r in enumerate(recs)]) for s, recs in splits.items()}
-    source = {"kind": "nonlinear-benchmark", "benchmark": name,
+    source = {"kind": "nonlinear-benchmark", "benchmark": name, "name": name or "benchmark",
               "records": {s: [str(getattr(r, "name", "") or "") for r in recs] for s, recs in splits.items()}}
     ds = from_arrays(Ts=_sample_time([r for recs in splits.values() for r in recs], Ts),
                      u_train=arrays["train"][0], y_train=arrays["train"][1],

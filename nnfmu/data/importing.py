@@ -260,8 +260,8 @@ def _names(table: Table, base: tuple[Entry, ...], cols: list, n_in: int) -> tupl
 
 def _source(file_lists, columns, splits, reader, base, resample: int, Ts_files: float) -> dict:
     files = {s: [str(p.resolve()) for p in file_lists.get(s, file_lists["train"])] for s in splits}
-    source = {"kind": "import", "format": sorted({format_of(p, reader.fmt) for g in file_lists.values() for p in g}),
-              "files": files,
+    formats = sorted({format_of(p, reader.fmt) for g in file_lists.values() for p in g})
+    source = {"kind": "import", "name": _identifier(file_lists["train"][0].stem), "format": formats, "files": files,
               "columns": {s: [str(e.ref) for e in (_override(base, columns[s], s) if s in columns else base)]
                           for s in splits}}
     if resample > 1:
