@@ -24,7 +24,8 @@ def test_legend_of_ten_fmus_with_long_names_is_readable(tmp_path, monkeypatch):
            for k, n in enumerate(names, 1)]
     saved = []
     real = matplotlib.figure.Figure.savefig
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (saved.append(fig), real(fig, *a, **k))[1])
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, *a, **k: (saved.append(fig), real(fig, *a, **k))[1])
     png = plot_trajectory(ds, evs, tmp_path / "fig.png", index=0)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (fig,) = saved

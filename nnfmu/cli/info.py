@@ -115,8 +115,8 @@ def _checkpoint(path: Path) -> dict:
 def render(doc: dict) -> str:
     """The description as a few readable lines."""
     lines = [f"{doc['path']}: {doc['kind']}"]
-    head = {"dataset": ("Ts",), "fmu": ("model", "fmi_version", "interfaces", "platforms", "Ts", "generation_tool",
-                                        "generated"), "checkpoint": ("name", "Ts")}[doc["kind"]]
+    head = {"dataset": ("Ts",), "fmu": ("model", "description", "fmi_version", "interfaces", "platforms", "Ts",
+                                        "generation_tool", "generated"), "checkpoint": ("name", "Ts")}[doc["kind"]]
     lines += [f"  {key}: {_text(doc[key])}" for key in head if doc.get(key) not in (None, [], "")]
     for role in ("inputs", "outputs", "parameters"):
         if doc.get(role):
@@ -142,6 +142,8 @@ def _channel(c: dict) -> str:
 
 
 def _text(value) -> str:
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return ", ".join(value)
     if isinstance(value, (dict, list)):
         return json.dumps(value, default=str)
     return f"{value:g}" if isinstance(value, float) else str(value)

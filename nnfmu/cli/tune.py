@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="training seed of the first repetition (default 0)")
     p.add_argument("--storage",
                    help="folder for Ray's trial records (default ~/ray_results; on a cluster, a shared one)")
-    p.add_argument("-o", "--out", default="best.json", help="where to write the best hyperparameters (default best.json)")
+    p.add_argument("-o", "--out", default="best.json",
+                   help="where to write the best hyperparameters (default best.json)")
     p.set_defaults(func=_run)
 
 

@@ -221,33 +221,40 @@ def load_files(
     Ts_files = _sample_time(reader, file_lists, Ts, time_column)
     first = file_lists["train"][0]
     names = _names(reader.table(first), base, reader.columns(first, base), n_in)
-    data, seen = {}, {}
-    for split in splits:
-        ents = _override(base, columns[split], split) if split in columns else base
-        us, ys = [], []
-        for path in file_lists.get(split, file_lists["train"]):
-            cols = reader.columns(path, ents)
-            key = (path.resolve(), tuple(c for g in cols for c in g))
-            if key in seen and seen[key] != split:
-                raise DataError(f"the {split} split would read the same columns of {path} as the {seen[key]} "
-                                f"split; give it its own columns (columns={{'{split}': [...]}}, CLI --{split}-columns)"
-                                " or its own files")
-            seen[key] = split
-            where = f"{path} ({split})"
-            table = np.asarray(_stack(reader.table(path), cols, where))
-            if table.shape[1] != len(names[0]) + len(names[1]):
-                raise DataError(f"{where}: the columns {list(key[1])} give {table.shape[1]} channels, expected "
-                                f"{len(names[0])} inputs and {len(names[1])} outputs as in the training files")
-            table = decimate(table, resample, where)
-            us.append(table[:, :len(names[0])])
-            ys.append(table[:, len(names[0]):])
-        data[split] = make_trajectories(us, ys, split)
+    seen: dict = {}
+    data = {split: _read_split(reader, split, file_lists.get(split, file_lists["train"]),
+                               _override(base, columns[split], split) if split in columns else base,
+                               names, resample, seen) for split in splits}
     source = _source(file_lists, columns, splits, reader, base, resample, Ts_files)
     ds = Dataset(Ts=Ts_files * resample, inputs=tuple(names[0]), outputs=tuple(names[1]), splits=data,
                  source=source).with_units(units)
     if carve:
         ds = ds.with_validation(valid_fraction, seed=seed, n_traj=valid_trajectories)
     return ds
+
+
+def _read_split(reader: _Reader, split: str, paths: list[Path], ents: tuple[Entry, ...],
+                names: tuple[list[str], list[str]], resample: int, seen: dict):
+    """One split's trajectories, one per file; ``seen`` maps (file, columns) to the split that read them."""
+    n_u, n_y = len(names[0]), len(names[1])
+    us, ys = [], []
+    for path in paths:
+        cols = reader.columns(path, ents)
+        key = (path.resolve(), tuple(c for g in cols for c in g))
+        if seen.get(key, split) != split:
+            raise DataError(f"the {split} split would read the same columns of {path} as the {seen[key]} split; "
+                            f"give it its own columns (columns={{'{split}': [...]}}, CLI --{split}-columns) or its "
+                            "own files")
+        seen[key] = split
+        where = f"{path} ({split})"
+        table = _stack(reader.table(path), cols, where)
+        if table.shape[1] != n_u + n_y:
+            raise DataError(f"{where}: the columns {list(key[1])} give {table.shape[1]} channels, expected {n_u} "
+                            f"inputs and {n_y} outputs as in the training files")
+        table = decimate(table, resample, where)
+        us.append(table[:, :n_u])
+        ys.append(table[:, n_u:])
+    return make_trajectories(us, ys, split)
 
 
 def _names(table: Table, base: tuple[Entry, ...], cols: list, n_in: int) -> tuple[list[str], list[str]]:
@@ -266,5 +273,6 @@ def _source(file_lists, columns, splits, reader, base, resample: int, Ts_files: 
                           for s in splits}}
     if resample > 1:
         source["resampled"] = {"factor": resample, "original_Ts": Ts_files,
-                               "filter": "FIR low-pass (firwin, Hamming, 10q+1 taps per stage of at most 10), filtfilt (zero phase)"}
+                               "filter": "FIR low-pass (firwin, Hamming, 10q+1 taps per stage of at most 10), "
+                                         "run forward and backward (filtfilt, zero phase)"}
     return source
