@@ -36,11 +36,19 @@ _TRAIN_OPTIONS = (
     ("--epochs", "epochs", int, "maximum epochs (default 100)"),
     ("--patience", "patience", int, "early-stopping patience in epochs, 0 = off (default 15)"),
     ("--batch-size", "batch_size", int, "trajectories or windows per step (default 64)"),
-    ("--truncate", "truncate", int, "train on windows of this many samples (multiple shooting; default: whole)"),
+    ("--truncate", "truncate", int, "train on windows of N samples (default: whole trajectories): each epoch "
+     "cuts every trajectory into consecutive, non-overlapping windows (stride N) from a random offset below N, "
+     "drops the shorter tail, starts each window from its measured first output and shuffles all windows "
+     "into batches"),
     ("--seed", "seed", int, "random seed (default 0)"),
-    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none)"),
+    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none). Alone (without --epochs "
+     "and --patience) it means: train until the budget is spent and keep the best epoch; the progress bar shows "
+     "the time left"),
 )
 
+
+# --max-minutes alone: no epoch limit that a budget could reach, and no early stopping
+BUDGET_EPOCHS = 10**9
 
 # (option, HybridConfig field, type, help): only with --arch hybrid.
 _HYBRID_OPTIONS = (
@@ -68,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="network architecture, or hybrid (physics + neural correction; see --physics)")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"],
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
-    p.add_argument("--out", required=True, help="checkpoint file to write (.pt)")
+    p.add_argument("-o", "--out", required=True, help="checkpoint file to write (.pt)")
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
         p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
     hybrid = p.add_argument_group("hybrid models (--arch hybrid)")
@@ -90,6 +98,8 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
     from nnfmu.training import TrainConfig
 
     changes = _given(args, _TRAIN_OPTIONS)
+    if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
+        changes.update(epochs=BUDGET_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
         changes["strategy"] = args.strategy
     if hybrid and changes.get("strategy", "parallel") != "parallel":
