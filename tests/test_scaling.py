@@ -60,3 +60,13 @@ def test_training_runs_on_one_thread_by_default_and_restores_the_callers(tiny, t
     assert seen == [1, 1, 2, 2]
     with pytest.raises(ConfigError, match="threads must be a positive integer"):
         check_threads(0)
+
+
+def test_linear_identification_shows_the_orders_and_the_refinement_cost(tiny, capsys):
+    from nnfmu.linear import identify_linear
+
+    model = identify_linear(tiny, max_order=3, max_evaluations=3, progress=True)
+    bars = capsys.readouterr().err
+    assert "linear: choose the order" in bars and "order=3" in bars
+    assert f"linear: refine order {model.n_x} (output error)" in bars and "cost=" in bars
+    assert f"{model.info['refinement']['evaluations']}/3" in bars

@@ -125,7 +125,7 @@ class Study:
             self.path("fmus", "physics")
         cells += [
             Cell("identify linear baseline", (lin_json,), (data,),
-                 lambda: steps.identify_baseline(data, dict(self.budget.linear), lin_json)),
+                 lambda: steps.identify_baseline(data, dict(self.budget.linear), lin_json, self.progress)),
             Cell("export linear baseline", (lin_fmu,), (lin_json,),
                  lambda: steps.export_linear(lin_json, lin_fmu, self.fmu_name("linear"))),
             Cell("export physics model", (phys_fmu,), (), lambda: steps.export_physics(self.system, phys_fmu)),

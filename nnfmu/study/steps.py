@@ -145,10 +145,10 @@ def export_network(ckpt: Path, fmu: Path, name: str) -> str:
     return f"wrote {fmu.name}"
 
 
-def identify_baseline(data_dir: Path, options: dict, out: Path) -> str:
+def identify_baseline(data_dir: Path, options: dict, out: Path, progress: bool = False) -> str:
     from nnfmu.linear import identify_linear
 
-    model = identify_linear(load_dataset(data_dir), **options)
+    model = identify_linear(load_dataset(data_dir), progress=progress, **options)
     model.save(out)
     return f"order {model.n_x}, init '{model.init}'"
 
