@@ -204,6 +204,7 @@ def train(
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
         model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
         model = model.to(dtype)
+        _check_device(model, device)
         seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
         model = model.to(device)
         session = Session(model, cfg, seqs, dataset.valid, out)
@@ -225,6 +226,12 @@ def train(
 
 
 fit = train
+
+
+def _check_device(model: StepModel, device: torch.device) -> None:
+    if device.type != "cpu" and getattr(model.config, "physics_backend", None) == "compiled":
+        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
+                          "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
 
 
 def _as_train_config(train_config) -> TrainConfig:
