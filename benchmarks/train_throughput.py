@@ -1,4 +1,4 @@
-"""Training throughput in trajectory-steps per CPU-second on the valve paper shape: threads, fast path, strategies.
+"""Training throughput in trajectory-steps per CPU-second on the valve paper shape: threads and strategies.
 
 The paper's valve data: 900 training trajectories of 500 steps, 2 inputs, 2
 outputs. One "trajectory-step" is one sample of one trajectory through the
@@ -10,14 +10,12 @@ count), and wall-clock rates beside them; the variants are run interleaved,
 the same run. Pin it to one core on a shared machine::
 
     taskset -c 1 python benchmarks/train_throughput.py --compare threads
-    taskset -c 1 python benchmarks/train_throughput.py --compare rollout --hidden 32 --batch-sizes 64 900
+    taskset -c 1 python benchmarks/train_throughput.py --compare strategies --archs gru lstm --hidden 32
 
 Comparisons (``--compare``):
 
 - ``threads``: torch's default thread count (all cores) against one thread, the
   nnfmu default (:mod:`nnfmu.training.resources`);
-- ``rollout``: the GRU's parallel rollout, eager cell loop against the fused
-  one-node rollout (:mod:`nnfmu.models.fast_gru`) that training uses;
 - ``strategies``: parallel against series-parallel, for each ``--archs``.
 """
 
@@ -50,19 +48,6 @@ def time_updates(rollout, model, un, yn, batch: int, n_batches: int) -> tuple[fl
     return time.process_time() - c0, time.perf_counter() - t0
 
 
-def eager_gru(model):
-    """The GRU's parallel rollout as the plain cell loop (what evaluation and the FMU compute)."""
-    def rollout(un, yn):
-        yn0 = yn[:, 0]
-        _, hs, cs = model._split(model._init_norm(yn0, un[:, 0]))
-        y, ys, weights = yn0, [yn0], model._weights()
-        for un_k in un[:, :-1].unbind(1):
-            y, hs, cs = model._cell_step(y, un_k, hs, cs, weights)
-            ys.append(y)
-        return torch.stack(ys, dim=1)
-    return rollout
-
-
 def variants(kind: str, model, threads: int | None) -> dict:
     """name -> (rollout, threads) of the comparison ``kind``."""
     parallel = lambda u, y: model.rollout_normalised(u, y[:, 0])  # noqa: E731
@@ -70,8 +55,6 @@ def variants(kind: str, model, threads: int | None) -> dict:
     if kind == "threads":
         return {f"{DEFAULT_THREADS} threads (torch default)": (parallel, DEFAULT_THREADS),
                 "1 thread (nnfmu default)": (parallel, 1)}
-    if kind == "rollout":
-        return {"eager cell loop": (eager_gru(model), one), "fused rollout (nnfmu)": (parallel, one)}
     return {"parallel": (parallel, one), "series-parallel": (lambda u, y: model.rollout_normalised(u, y[:, 0], y), one)}
 
 
@@ -90,13 +73,13 @@ def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int)
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--compare", choices=["threads", "rollout", "strategies"], default="threads")
+    p.add_argument("--compare", choices=["threads", "strategies"], default="threads")
     p.add_argument("--archs", nargs="+", default=["gru"])
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--batch-sizes", nargs="+", type=int, default=[64, 900])
     p.add_argument("--batches", type=int, default=2, help="optimiser steps timed per run")
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--threads", type=int, default=None, help="threads of the rollout/strategies comparisons")
+    p.add_argument("--threads", type=int, default=None, help="threads of the strategies comparison (default 1)")
     args = p.parse_args()
     torch.set_flush_denormal(True)  # as nnfmu.training.train does (see session.flush_denormals)
     g = torch.Generator().manual_seed(0)

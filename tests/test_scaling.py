@@ -70,3 +70,15 @@ def test_linear_identification_shows_the_orders_and_the_refinement_cost(tiny, ca
     assert "linear: choose the order" in bars and "order=3" in bars
     assert f"linear: refine order {model.n_x} (output error)" in bars and "cost=" in bars
     assert f"{model.info['refinement']['evaluations']}/3" in bars
+
+
+def test_a_hybrid_with_compiled_physics_is_refused_on_a_gpu_in_one_line():
+    from types import SimpleNamespace
+
+    from nnfmu.training.trainer import _check_device
+
+    hybrid = SimpleNamespace(config=SimpleNamespace(physics_backend="compiled"))
+    with pytest.raises(ConfigError, match="compiled physics runs on the CPU only.*--physics-backend sx"):
+        _check_device(hybrid, torch.device("cuda"))
+    _check_device(hybrid, torch.device("cpu"))
+    _check_device(SimpleNamespace(config=SimpleNamespace(physics_backend="sx")), torch.device("cuda"))
