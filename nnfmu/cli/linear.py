@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="residual evaluations allowed to the refinement (default 100)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
     p.add_argument("--save", metavar="FILE", help="also (or only) write A, B, C, D and offsets as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bars (orders tried, refinement cost)")
     p.add_argument("--name", default="linear", help="the FMU's model name (a C identifier; default 'linear')")
     add_fmu_options(p)
     p.set_defaults(func=_run)
@@ -70,7 +71,7 @@ def _run(args: argparse.Namespace) -> int:
                           refine=not args.no_refine, refine_x0=args.refine_x0,
                           max_evaluations=args.max_evaluations)
     dataset = load_dataset(args.data)
-    model = identify_linear(dataset, config)
+    model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
     if args.save:
         print(f"wrote {model.save(args.save)}")

@@ -7,12 +7,14 @@ stops and keeps the best checkpoint; ``--resume`` continues it.
 
 ``--arch hybrid --physics valve|arm [--physics-params FILE.json] [--train-physics NAME,...]``
 trains a physics model plus a neural correction (:mod:`nnfmu.hybrid`): parallel strategy only,
-in float64, on one CPU thread; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
+in float64; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
 """
 
 from __future__ import annotations
 
 import argparse
+
+from nnfmu.cli._resources import add_resource_options, check_resource_options
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -86,6 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_resource_options(p)
     p.set_defaults(func=_run)
 
 
@@ -174,6 +177,7 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.training import train
 
     out = Path(args.out)
+    device = check_resource_options(args)
     ds = load_dataset(args.data)
     stored = load_checkpoint(out) if args.resume else None
     if stored is None and out.exists() and not args.force:
@@ -181,11 +185,8 @@ def _run(args: argparse.Namespace) -> int:
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
     hybrid = model_config.arch == "hybrid"
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
-    if hybrid:  # hundreds of tiny operations per step: more intra-op threads only add contention
-        import torch
-
-        torch.set_num_threads(1)
-    result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet)
+    result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
+                   device=device, threads=args.threads)
     for note in result.notes:
         print(f"note: {note}")
     print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, "

@@ -38,8 +38,9 @@ _REQUIRED = ("model_config", "meta", "state_dict")
 
 
 def state_snapshot(model: torch.nn.Module) -> dict:
-    """Detached copies of the model's weights and buffers (a ``state_dict`` that later training cannot change)."""
-    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+    """Detached CPU copies of the model's weights and buffers (a ``state_dict`` that later training cannot
+    change, and that loads on any device)."""
+    return {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
 
 
 def save_checkpoint(

@@ -9,21 +9,24 @@ import torch
 
 from nnfmu.data import Trajectories
 from nnfmu.metrics import NrmseResult, nrmse
-from nnfmu.models.base import StepModel
+from nnfmu.models.base import StepModel, torch_threads
+from nnfmu.training.resources import check_threads
 
 _EVAL_BATCH = 1024
 
 
-def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False) -> list[np.ndarray]:
+def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False,
+             threads: int | None = None) -> list[np.ndarray]:
     """Free-run predictions ``[(n_i, n_y), ...]`` in physical units for every trajectory of ``traj``.
 
     Each trajectory starts from its measured ``y[0]``. Trajectories of equal
     length are simulated together in batches. With ``float64`` a float64 copy
     of the model runs (as :meth:`StepModel.simulate` does); otherwise the model
-    runs in its own dtype. The model's train/eval mode is left unchanged.
+    runs in its own dtype, on the model's device, on ``threads`` intra-op threads (default one:
+    :mod:`nnfmu.training.resources`). The model's train/eval mode is left unchanged.
     """
     runner = copy.deepcopy(model).double() if float64 else model
-    dtype = runner.u_mean.dtype
+    dtype, device = runner.u_mean.dtype, runner.u_mean.device
     was_training = runner.training
     runner.eval()
     preds: list = [None] * traj.n_traj
@@ -31,13 +34,13 @@ def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False) -> 
     for i, n in enumerate(traj.lengths.tolist()):
         by_length.setdefault(n, []).append(i)
     try:
-        with torch.no_grad():
+        with torch.no_grad(), torch_threads(check_threads(threads)):
             for index in by_length.values():
                 for start in range(0, len(index), _EVAL_BATCH):
                     chunk = index[start:start + _EVAL_BATCH]
-                    u = torch.as_tensor(np.stack([traj.u[i] for i in chunk]), dtype=dtype)
-                    y0 = torch.as_tensor(np.stack([traj.y[i][0] for i in chunk]), dtype=dtype)
-                    y = runner(u, y0).double().numpy()
+                    u = torch.as_tensor(np.stack([traj.u[i] for i in chunk]), dtype=dtype, device=device)
+                    y0 = torch.as_tensor(np.stack([traj.y[i][0] for i in chunk]), dtype=dtype, device=device)
+                    y = runner(u, y0).double().cpu().numpy()
                     for j, i in enumerate(chunk):
                         preds[i] = y[j]
     finally:

@@ -22,6 +22,7 @@ from nnfmu.models.checkpoint import save_checkpoint, state_snapshot
 from nnfmu.training.batches import epoch_batches, masked_mse
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
+from nnfmu.training.resources import cpu_state
 
 
 @contextlib.contextmanager
@@ -148,7 +149,7 @@ class Session:
 
     def resume_state(self) -> dict:
         return {"epoch": self.epoch, "state_dict": state_snapshot(self.model),
-                "optimizer": self.optimizer.state_dict(), "torch_rng": torch.get_rng_state(),
+                "optimizer": cpu_state(self.optimizer.state_dict()), "torch_rng": torch.get_rng_state(),
                 "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed}
 
     def restore(self, ckpt: dict) -> None:

@@ -30,7 +30,7 @@ import torch
 from nnfmu.data import Dataset
 from nnfmu.errors import CheckpointError, ConfigError
 from nnfmu.metrics import NrmseResult
-from nnfmu.models.base import StepModel
+from nnfmu.models.base import StepModel, torch_threads
 from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.registry import build_model
@@ -38,6 +38,7 @@ from nnfmu.progress import advance, training_bar
 from nnfmu.training.batches import normalised_sequences
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
+from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
 
 Callback = Callable[[int, dict], None]
@@ -152,6 +153,8 @@ def train(
     resume: bool = False,
     progress: bool = False,
     callback: Callback | None = None,
+    device: str | torch.device | None = "auto",
+    threads: int | None = None,
 ) -> TrainResult:
     """Train a step network in parallel or series-parallel mode; early stopping on validation free-run NRMSE.
 
@@ -173,6 +176,12 @@ def train(
         Show a tqdm bar with the loss and the validation NRMSE.
     callback : callable, optional
         ``callback(epoch, metrics)`` after every epoch; raise :class:`StopTraining` to stop.
+    device : {'auto', 'cpu', 'cuda'} or 'cuda:N'
+        Where to train (:func:`nnfmu.training.resources.resolve_device`); the returned model
+        is on the CPU and the checkpoint holds CPU tensors whatever the device.
+    threads : int, optional
+        Intra-op torch threads of this training (default one: the measured policy of
+        :mod:`nnfmu.training.resources`); the caller's setting is restored afterwards.
 
     Raises
     ------
@@ -191,11 +200,14 @@ def train(
             train_config = TrainConfig.from_dict(ckpt["train_config"])
     cfg = _as_train_config(train_config)
     dataset, notes = _prepare(dataset, cfg)
-    dtype = getattr(torch, cfg.dtype)
-    with torch.random.fork_rng(devices=[]), flush_denormals():
+    dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
+    with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
         model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
         model = model.to(dtype)
-        session = Session(model, cfg, normalised_sequences(model, dataset.train, dtype, "train"), dataset.valid, out)
+        _check_device(model, device)
+        seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
+        model = model.to(device)
+        session = Session(model, cfg, seqs, dataset.valid, out)
         if ckpt:
             session.restore(ckpt)
         stop_reason = _run(session, progress, callback)
@@ -206,6 +218,7 @@ def train(
             test = free_run_nrmse(best, dataset.test, float64=True) if "test" in dataset.splits else None
             # still inside fork_rng: the resume state saved here holds the training RNG, not the caller's
             session.save({"test_nrmse": None if test is None else test.mean, "stop_reason": stop_reason})
+    model = model.cpu()
     model.load_state_dict(session.best_state)
     model.eval()
     return TrainResult(model, session.history, session.best_epoch, session.best_score, test, stop_reason,
@@ -213,6 +226,12 @@ def train(
 
 
 fit = train
+
+
+def _check_device(model: StepModel, device: torch.device) -> None:
+    if device.type != "cpu" and getattr(model.config, "physics_backend", None) == "compiled":
+        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
+                          "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
 
 
 def _as_train_config(train_config) -> TrainConfig:
