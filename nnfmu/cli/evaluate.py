@@ -39,6 +39,9 @@ def _run(args: argparse.Namespace) -> int:
     evaluations = evaluate(args.fmus, ds, split=args.split, progress=True)
     print(f"NRMSE on {args.data} ({args.split}: {ds.split(args.split).n_traj} trajectories, free run from measured y0)")
     print(format_table(evaluations, ds.output_names))
+    for ev in evaluations:  # the FMU warns on these samples: its outputs there are extrapolated
+        if ev.out_of_range is not None:
+            print(f"inputs outside the valid range of {ev.name}: {ev.out_of_range.describe()}")
     if args.json:
         doc = {"data": str(args.data), "split": args.split, "Ts": ds.Ts,
                "models": [ev.to_json(ds.output_names) for ev in evaluations]}
