@@ -10,9 +10,9 @@ with
 - the output interval (the communication step) equal to ``Ts``;
 
 and the recorded outputs at ``t_0 .. t_{N-1}`` are handed to
-:func:`nnfmu.metrics.nrmse`. :func:`evaluate` also counts the samples whose
-inputs lie outside the FMU's declared valid range (``min``/``max``). The FMU is unpacked and instantiated once and
-reset between trajectories.
+:func:`nnfmu.metrics.nrmse`. The FMU is unpacked and instantiated once and
+reset between trajectories. :func:`evaluate` also counts the samples whose
+inputs lie outside the FMU's declared valid range (``min``/``max``).
 """
 
 from __future__ import annotations
