@@ -103,6 +103,11 @@ static void get_outputs(fmu f, double *y) {
   if (status) { printf("get failed\n"); exit(5); }
 }
 
+static void free_instance(fmu f) {
+  if (version == 2) ((fmi2FreeInstanceTYPE *)must("fmi2FreeInstance"))(f.c);
+  else ((fmi3FreeInstanceTYPE *)must("fmi3FreeInstance"))(f.c);
+}
+
 static int do_step(fmu f, double t, double h) {
   fmi3Boolean event, terminate, early;
   fmi3Float64 last;
@@ -127,6 +132,7 @@ static int run(long long n) {
     get_outputs(f, y);
     printf("y %.17g %.17g\n", y[0], y[1]);
   }
+  free_instance(f);
   return 0;
 }
 
@@ -158,6 +164,8 @@ static int schedule(long long n, long long block, double t0) {
   printf("samples %lld time %.17g worst %d mismatches %lld y %.17g %.17g\n", n, t, worst, mismatches, ya[0], ya[1]);
   status = do_step(b, t0 + (double)n * Ts, 1e9);
   printf("huge step status %d\n", status);
+  free_instance(a);
+  free_instance(b);
   return 0;
 }
 
