@@ -7,7 +7,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.nnfmu-installed
 
-.PHONY: setup demo test docs clean
+.PHONY: setup demo test docs clean system-packages cross-toolchain
 
 setup: $(STAMP)
 
@@ -21,8 +21,30 @@ $(STAMP): pyproject.toml
 demo: setup
 	$(VENV)/bin/nnfmu demo
 
-test: setup
+test: setup system-packages cross-toolchain
 	$(PY) -m pytest -q
+
+# What the cross-platform FMU tests run binaries with: Wine (Windows), QEMU user mode and Debian's aarch64
+# C library (ARM64 Linux). Installed with apt-get where it runs as root; elsewhere those tests skip, naming them.
+SYSTEM_PACKAGES := wine wine64 qemu-user libc6-arm64-cross
+
+system-packages:
+	@missing=$$(for p in $(SYSTEM_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -z "$$missing" ]; then exit 0; fi; \
+	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing" $$missing "with apt-get (for the cross-platform FMU tests)"; \
+	  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; } \
+	    >/dev/null 2>&1 || echo "could not install" $$missing "- the tests that need them skip and name them"; \
+	else echo "not installing" $$missing "(needs apt-get as root) - the tests that need them skip and name them"; fi
+
+# Zig builds each cross target's C library into its cache (~/.cache/zig) on first use, minutes for Windows:
+# once here, so that the tests and later exports take seconds. A failure only makes the first export slow.
+CROSS_STAMP := $(VENV)/.nnfmu-zig-prepared
+
+cross-toolchain: $(CROSS_STAMP)
+
+$(CROSS_STAMP): $(STAMP)
+	-$(PY) -m nnfmu.export.platforms && touch $(CROSS_STAMP)
 
 # the documentation site (docs/, mkdocs.yml) into site/; --strict: a broken link or reference fails
 docs: setup

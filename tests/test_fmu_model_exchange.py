@@ -6,26 +6,34 @@
   held inputs, and CVode agrees with a fine RK4 of the same ODE (so the difference is RK4's own error);
 - fmi2/fmi3GetDirectionalDerivative equals central finite differences of the FMU's own derivatives
   and outputs to 1e-6 relative;
-- the Model Exchange state machine refuses what FMI forbids, and discrete-time models stay co-simulation.
+- the Model Exchange state machine refuses what FMI forbids, and discrete-time models stay co-simulation;
+- the shipped sources (every template is in these two FMUs) compile as strict C99 for Windows, as MSVC
+  needs, and fmpy's CMake route rebuilds a binary that computes the same derivatives.
 """
 
 from __future__ import annotations
 
 import ctypes
+import os
+import shutil
 import xml.etree.ElementTree as ET
 import zipfile
 
+import casadi as ca
 import fmpy
 import numpy as np
 import pytest
 import torch
+from cross_tools import compile_strict_c99
+from fmpy.build import build_platform_binary
 from fmpy.validation import validate_fmu
 from fmu_cases import FMICallException, built_fmu, unzipped
 
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.export import build_fmu, casadi_model
 from nnfmu.hybrid import HybridConfig, HybridStepModel
-from nnfmu.physics import valve_system
+from nnfmu.physics import rk4_function, valve_system
+from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 
 #: fmpy's CVode (relative tolerance 1e-10) against the FMU's RK4 (4 sub-steps of 10 us), as a fraction of
 #: each output's range over the test trajectory: RK4's discretisation error of the valve (measured 4e-5).
@@ -133,14 +141,14 @@ def test_hybrid_model_exchange_matches_its_co_simulation(hybrid_fmu):
     cs = simulate(fmu, "CoSimulation", signal, n, y0)
     me = simulate(fmu, "ModelExchange", signal, n, y0, solver="CVode", relative_tolerance=1e-10)
     np.testing.assert_allclose(cs, model.simulate(u, y0), rtol=1e-10, atol=0)
-    assert_model_exchange_is_the_ode(me, cs, _hybrid(n_sub=16).simulate(u, y0))
+    assert_model_exchange_is_the_ode(me, cs, casadi_model(_hybrid(n_sub=16)).simulate(u, y0))
 
 
 class MeInstance:
     """A Model Exchange instance in continuous-time mode, through fmpy, the same for FMI 2 and 3."""
 
     def __init__(self, fmu, start: dict):
-        folder = unzipped(fmu)
+        folder = unzipped(fmu) if fmu.suffix == ".fmu" else fmu  # or an unzipped FMU
         self.md = fmpy.read_model_description(str(folder))
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
@@ -233,3 +241,47 @@ def test_model_exchange_state_machine(valve_fmu):
 def test_discrete_time_models_stay_co_simulation(name):
     md = fmpy.read_model_description(str(built_fmu(name, 2)))
     assert md.modelExchange is None and md.coSimulation is not None and not md.derivatives
+
+
+@pytest.mark.parametrize("which", ["valve", "hybrid"])
+def test_sources_are_strict_c99_for_windows(valve_fmu, hybrid_fmu, which, tmp_path):
+    fmu = valve_fmu if which == "valve" else hybrid_fmu[1]
+    md = fmpy.read_model_description(str(unzipped(fmu)))
+    files = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
+    assert {"nnfmu_me.c", "nnfmu_me_model.c", f"nnfmu_fmi{md.fmiVersion[0]}_me.c"} <= set(files)
+    compile_strict_c99(unzipped(fmu) / "sources", files, tmp_path)
+
+
+def pendulum() -> CasadiModel:
+    """A damped pendulum, ``angle'' = -g_l sin(angle) - damping angle' + torque``: a small continuous-time model."""
+    x, u, p, y0 = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("p", 2), ca.SX.sym("y0")
+    ode = ca.Function("ode", [x, u, p], [ca.vertcat(x[1], -p[0] * ca.sin(x[0]) - p[1] * x[1] + u)],
+                      ["x", "u", "p"], ["xdot"])
+    output = ca.Function("output", [x, p], [x[0]], ["x", "p"], ["y"])
+    x_next = rk4_function(ode, Ts=0.01, n_sub=2)(x, u, p)
+    step = ca.Function("step", [x, u, p], [x_next, output(x_next, p)], ["x", "u", "p"], ["x_next", "y_next"])
+    init = ca.Function("init", [y0, u, p], [ca.vertcat(y0, 0)], ["y0", "u0", "p"], ["x0"])
+    spec = SystemSpec("pendulum", 0.01, [Variable("torque", "1/s2")], [Variable("angle", "rad", start=0.5)],
+                      [Variable("g_l", "1/s2", start=9.81), Variable("damping", "1/s", start=0.3)])
+    states = [Variable("angle", "rad"), Variable("rate", "rad/s")]
+    return CasadiModel(init, step, spec, continuous=ContinuousDynamics(ode, output, states))
+
+
+def test_fmpy_cmake_rebuilds_a_model_exchange_fmu(tmp_path):
+    fmu = build_fmu(pendulum(), tmp_path / "pendulum.fmu")
+    assert validate_fmu(str(fmu)) == []
+    folder = tmp_path / "rebuilt"
+    shutil.copytree(unzipped(fmu), folder)
+    shutil.rmtree(folder / "binaries")
+    (tmp_path / "build").mkdir()
+    build_platform_binary(os.path.abspath(folder), build_dir=os.path.abspath(tmp_path / "build"))
+    instances = [MeInstance(f, {"angle_start": 1.0}) for f in (fmu, folder)]
+    for instance in instances:
+        instance.set({"torque": 0.5})
+    derivatives = [f"der({s})" for s in instances[0].states]
+    jacobians = [i.jacobian(derivatives, ["x.angle", "x.rate", "torque"]) for i in instances]
+    np.testing.assert_array_equal(jacobians[0], [[0.0, 1.0, 0.0], [-9.81 * np.cos(1.0), -0.3, 1.0]])
+    np.testing.assert_array_equal(*jacobians)
+    np.testing.assert_array_equal(*(i.get(derivatives) for i in instances))
+    for instance in instances:
+        instance.fmu.freeInstance()

@@ -24,11 +24,13 @@ are not passed on, and the model code's x86 runtime dispatch is guarded in the C
 
 from __future__ import annotations
 
+import os
 import platform as _platform
 import shutil
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -139,23 +141,65 @@ def build_binaries(root: Path, model_identifier: str, sources: Sequence[Path], f
     """Compile ``sources`` for every platform in ``targets`` into ``root/binaries/<folder>/``.
 
     The host's binary is built by the system C compiler with ``host_flags`` (and
-    ``compiler_command``); the others by ``zig cc`` with ``cross_flags``. Returns
-    ``{folder: seconds}`` and calls ``on_binary(folder, seconds)`` after each binary.
+    ``compiler_command``); the others by ``zig cc`` with ``cross_flags``. The compilers run
+    side by side, one per CPU core. Returns ``{folder: seconds}`` (each compile's own wall
+    time) and calls ``on_binary(folder, seconds)`` for each binary, in the order of ``targets``.
     """
     host = host_platform()
-    include = [root / "sources"]
-    seconds: dict[str, float] = {}
-    for target in targets:
+    if any(t != host for t in targets):
+        zig_executable()  # a missing toolchain is one clear error before anything is compiled
+
+    def build(target: Platform) -> tuple[str, float]:
         folder = target.folder(fmi_version)
         out = root / "binaries" / folder / f"{model_identifier}{target.suffix}"
         what = f"compiling the FMU binary of {model_identifier!r} for {folder}"
         start = time.perf_counter()
         if target == host:
-            compiler.compile_shared_library(sources, out, include_dirs=include, flags=host_flags,
+            compiler.compile_shared_library(sources, out, include_dirs=[root / "sources"], flags=host_flags,
                                             compiler=compiler_command, what=what)
         else:
-            cross_compile(target, sources, out, include_dirs=include, flags=cross_flags, what=what)
-        seconds[folder] = time.perf_counter() - start
-        if on_binary:
-            on_binary(folder, seconds[folder])
+            cross_compile(target, sources, out, include_dirs=[root / "sources"], flags=cross_flags, what=what)
+        return folder, time.perf_counter() - start
+
+    seconds: dict[str, float] = {}
+    with ThreadPoolExecutor(max_workers=max(1, min(len(targets), os.cpu_count() or 1))) as pool:
+        for folder, elapsed in pool.map(build, targets):
+            seconds[folder] = elapsed
+            if on_binary:
+                on_binary(folder, elapsed)
     return seconds
+
+
+def prepare(targets: Sequence[Platform] | None = None, echo: Callable[[str], None] = print) -> None:
+    """Let Zig build, once, what it builds per target on first use (its C libraries, into its cache).
+
+    The first cross-compile for a target takes minutes (Windows: mingw-w64's C runtime); later ones take
+    seconds. This builds a tiny FMU for every cross target and a tiny C program for each (as the test
+    suite's importer is), so that ``make test`` and the first real export do not pay it.
+    """
+    import casadi as ca
+
+    from nnfmu.export.fmu import build_fmu
+    from nnfmu.system import CasadiModel, SystemSpec
+
+    host = host_platform()
+    targets = [t for t in (targets or PLATFORMS.values()) if t != host]
+    x, u = ca.SX.sym("x"), ca.SX.sym("u")
+    step = ca.Function("step", [x, u], [ca.tanh(x) + u, x], ["x", "u"], ["x_next", "y_next"])
+    init = ca.Function("init", [x, u], [x], ["y0", "u0"], ["x0"])
+    model = CasadiModel(init, step, SystemSpec("prepare", 1.0, ["u"], ["y"]))
+    with tempfile.TemporaryDirectory(prefix="nnfmu-zig-prepare-") as tmp:
+        program = Path(tmp) / "main.c"
+        program.write_text("#include <stdio.h>\nint main(void) { printf(\"ok\\n\"); return 0; }\n", encoding="utf-8")
+        for target in targets:
+            start = time.perf_counter()
+            build_fmu(model, Path(tmp) / f"{target.tuple}.fmu", platforms=[target.tuple])
+            libs = ["-ldl"] if target.suffix == ".so" else []
+            compiler.run_compiler(["cc", "-target", target.zig_target, "-std=c99", "-O2", str(program), "-o",
+                                   str(Path(tmp) / f"{target.tuple}.exe"), *libs],
+                                  what=f"preparing Zig for {target.tuple}", compiler=str(zig_executable()))
+            echo(f"zig is ready for {target.tuple} ({time.perf_counter() - start:.0f} s)")
+
+
+if __name__ == "__main__":  # python -m nnfmu.export.platforms (make test runs it once)
+    prepare()

@@ -1,0 +1,153 @@
+"""One FMU with binaries for five platforms, cross-compiled here with Zig, and run for real.
+
+``python -m nnfmu.export m.pt --platforms linux64,win64,darwin64,aarch64-linux,aarch64-darwin`` (FMI 2) and
+``--platforms all`` (FMI 3) put every binary next to the sources; fmpy validates both. Then:
+
+- the Windows DLL runs under Wine with an x86-64 Windows build of the test importer, and the aarch64 Linux
+  library under QEMU user mode with an aarch64 build of it; both give the Linux binary's outputs;
+- the macOS binaries are Mach-O dylibs of the right architecture that export the FMI functions (and
+  nothing of nnfmu's own), the arm64 one code-signed as Apple silicon requires.
+
+The sources' strict-C check and the CMake rebuild are in tests/test_fmu_model_exchange.py (the Model
+Exchange FMUs list every template).
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pytest
+import torch
+from cross_tools import (Wine, binary_format, build_driver, macho_exports, outputs, qemu_or_skip, wine_or_skip,
+                         zig_or_skip)
+from fmpy.validation import validate_fmu
+from fmu_cases import unzipped
+
+from nnfmu.export.__main__ import main as export_main
+from nnfmu.export.compiler import run_compiler
+from nnfmu.export.fmu import fmi_header_dir
+from nnfmu.export.platforms import PLATFORMS
+from nnfmu.models import ModelConfig, build_model, save_checkpoint
+
+FMI2_NAMES = "linux64,win64,darwin64,aarch64-linux,aarch64-darwin"
+FMI_FUNCTIONS = {2: ("fmi2Instantiate", "fmi2DoStep", "fmi2GetReal", "fmi2SetReal", "fmi2FreeInstance",
+                     "fmi2GetFMUstate", "fmi2SerializeFMUstate"),
+                 3: ("fmi3InstantiateCoSimulation", "fmi3DoStep", "fmi3GetFloat64", "fmi3SetFloat64",
+                     "fmi3FreeInstance", "fmi3GetFMUState", "fmi3SerializeFMUState")}
+N_STEPS = 150
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    """A small GRU checkpoint exported for every platform, FMI 2 and FMI 3; ({version: fmu}, printed lines)."""
+    zig_or_skip()
+    folder = tmp_path_factory.mktemp("platforms")
+    meta = {"name": "valve_gru", "Ts": 4e-5, "input_range": [[0.0, 10.0], [0.0, 10.0]],
+            "inputs": [{"name": "u1", "unit": "V"}, {"name": "u2", "unit": "V"}],
+            "outputs": [{"name": "s", "unit": "m"}, {"name": "p", "unit": "Pa"}]}
+    torch.manual_seed(3)
+    net = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, hidden=8), meta)
+    with torch.no_grad():
+        net.u_mean.fill_(1.2), net.u_std.fill_(0.7)
+        net.y_mean.copy_(torch.tensor([5e-4, 3e5])), net.y_std.copy_(torch.tensor([2e-4, 1e5]))
+    checkpoint = save_checkpoint(folder / "m.pt", net)
+    built, printed = {}, {}
+    for version, names in ((2, FMI2_NAMES), (3, "all")):
+        built[version] = folder / f"m{version}.fmu"
+        argv = [str(checkpoint), "-o", str(built[version]), "--fmi-version", str(version), "--platforms", names]
+        assert export_main(argv) == 0
+    return built
+
+
+@pytest.fixture(scope="module")
+def drivers(tmp_path_factory):
+    """The test importer for this machine, and a function that builds it once for another platform."""
+    folder = tmp_path_factory.mktemp("drivers")
+    host = folder / "fmu_driver"
+    run_compiler(["-std=c99", "-O2", f"-I{fmi_header_dir()}", str(Path(__file__).parent / "c" / "fmu_driver.c"),
+                  "-o", str(host), "-ldl"], what="compiling the test importer")
+    built: dict[str, Path] = {}
+
+    def for_platform(name: str) -> Path:
+        if name not in built:
+            built[name] = build_driver(PLATFORMS[name], folder)
+        return built[name]
+
+    return for_platform, host
+
+
+@pytest.fixture(scope="module")
+def wine(tmp_path_factory):
+    wine_or_skip()
+    session = Wine(tmp_path_factory.mktemp("wine-prefix"))
+    yield session
+    session.close()
+
+
+def binary(fmu: Path, version: int, platform: str) -> Path:
+    target = PLATFORMS[platform]
+    return unzipped(fmu) / "binaries" / target.folder(version) / f"valve_gru{target.suffix}"
+
+
+def driver_args(fmu: Path, version: int) -> list[str]:
+    md = fmpy.read_model_description(str(unzipped(fmu)))
+    return [md.guid if version == 2 else md.instantiationToken, str(version), repr(4e-5), "run", str(N_STEPS)]
+
+
+def linux_outputs(fmu: Path, version: int, driver: Path) -> np.ndarray:
+    done = subprocess.run([str(driver), str(binary(fmu, version, "x86_64-linux")), *driver_args(fmu, version)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return np.array(outputs(done.stdout.splitlines()))
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_one_fmu_holds_every_platform_and_validates(fmus, version, capsys):
+    fmu = fmus[version]
+    assert validate_fmu(str(fmu)) == []
+    assert set(fmpy.supported_platforms(str(fmu))) == {"c-code", "linux64", "win64", "darwin64"}
+    expected = {"x86_64-linux": ("ELF shared object", "x86_64"), "aarch64-linux": ("ELF shared object", "aarch64"),
+                "x86_64-windows": ("PE DLL", "x86_64"), "x86_64-darwin": ("Mach-O dylib", "x86_64"),
+                "aarch64-darwin": ("Mach-O dylib", "aarch64")}
+    assert {p: binary_format(binary(fmu, version, p)) for p in expected} == expected
+    folders = sorted(p.name for p in (unzipped(fmu) / "binaries").iterdir())
+    assert folders == sorted(PLATFORMS[p].folder(version) for p in expected)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_windows_dll_under_wine_gives_the_linux_outputs(fmus, drivers, wine, version):
+    for_platform, host = drivers
+    exe = for_platform("x86_64-windows")
+    dll = binary(fmus[version], version, "x86_64-windows")
+    done = wine.run(exe, Wine.path(dll), *driver_args(fmus[version], version))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    got, want = np.array(outputs(done.stdout.splitlines())), linux_outputs(fmus[version], version, host)
+    assert got.shape == want.shape == (N_STEPS, 2) and np.ptp(want, axis=0).min() > 0
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)  # Windows' tanh may differ in the last bit
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_aarch64_library_under_qemu_gives_the_linux_outputs(fmus, drivers, version):
+    qemu = qemu_or_skip()
+    for_platform, host = drivers
+    exe = for_platform("aarch64-linux")
+    library = binary(fmus[version], version, "aarch64-linux")
+    done = subprocess.run([*qemu, str(exe), str(library), *driver_args(fmus[version], version)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    lines = done.stdout.splitlines()
+    assert lines[0] == "libm loaded before the FMU: no"  # the aarch64 library links its own libm
+    np.testing.assert_allclose(np.array(outputs(lines)), linux_outputs(fmus[version], version, host),
+                               rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("platform", ["x86_64-darwin", "aarch64-darwin"])
+@pytest.mark.parametrize("version", [2, 3])
+def test_macos_dylibs_export_the_fmi_functions(fmus, version, platform):
+    exported, signed = macho_exports(binary(fmus[version], version, platform))
+    assert set(FMI_FUNCTIONS[version]) <= exported
+    assert not [name for name in exported if name.startswith(("nnfmu_", "casadi_"))]  # the model's code stays inside
+    assert signed or platform == "x86_64-darwin"  # arm64 code must carry (at least an ad-hoc) signature
