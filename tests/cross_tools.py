@@ -37,10 +37,10 @@ def zig_or_skip() -> Path:
 
 def build_driver(target: Platform, folder: Path) -> Path:
     """tests/c/fmu_driver.c as an executable of ``target`` (no -lm, so the FMU must bring its maths)."""
-    exe = folder / f"fmu_driver-{target.tuple}{'.exe' if target.suffix == '.dll' else ''}"
+    exe = folder / f"fmu_driver-{target.fmi3}{'.exe' if target.suffix == '.dll' else ''}"
     libs = ["-ldl"] if target.suffix == ".so" else []
     run_compiler(["cc", "-target", target.zig_target, "-std=c99", "-O2", f"-I{fmi_header_dir()}", str(DRIVER),
-                  "-o", str(exe), *libs], what=f"compiling the test importer for {target.tuple}",
+                  "-o", str(exe), *libs], what=f"compiling the test importer for {target.fmi3}",
                  compiler=str(zig_or_skip()))
     return exe
 

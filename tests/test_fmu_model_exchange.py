@@ -170,6 +170,13 @@ class MeInstance:
     def get(self, names) -> np.ndarray:
         return np.array((self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([self.vr[k] for k in names]))
 
+    def derivatives(self) -> tuple[int, np.ndarray]:
+        """(status, der(x)) of getDerivatives / getContinuousStateDerivatives."""
+        dx = np.zeros(len(self.states))
+        status = self.fmu.getDerivatives(dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), dx.size) if not self.fmi3 \
+            else self.fmu.getContinuousStateDerivatives(dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), dx.size)
+        return status, dx
+
     def set_states(self, x: np.ndarray) -> None:
         x = np.ascontiguousarray(x, dtype=float)
         self.fmu.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
@@ -214,6 +221,22 @@ def test_directional_derivatives_equal_finite_differences(valve_fmu, hybrid_fmu,
     nonzero = {(unknowns[i], knowns[j]) for i, j in zip(*np.nonzero(jacobian))}
     assert len(nonzero) >= 19 and nonzero <= declared  # the ModelStructure covers every sensitivity
     me.fmu.terminate()
+    me.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("which", ["valve", "hybrid"])
+def test_input_outside_its_range_is_a_warning_in_model_exchange(valve_fmu, hybrid_fmu, which):
+    me = MeInstance(valve_fmu if which == "valve" else hybrid_fmu[1], {"p_start": 3e5})
+    assert me.derivatives()[0] == 0
+    maximum = next(v for v in me.md.modelVariables if v.name == "u1").max
+    me.set({"u1": float(maximum) + 1.0})
+    status, dx = me.derivatives()
+    assert status == 1 and np.isfinite(dx).all()  # fmi2Warning / fmi3Warning, and the derivatives
+    me.fmu.enterEventMode()
+    me.fmu.setBoolean([me.vr["input_range_error"]], [True])
+    me.fmu.enterContinuousTimeMode()
+    with pytest.raises(FMICallException):
+        me.derivatives()
     me.fmu.freeInstance()
 
 

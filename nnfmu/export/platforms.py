@@ -43,26 +43,26 @@ __all__ = ["Platform", "PLATFORMS", "host_platform", "parse_platforms", "zig_exe
 
 @dataclass(frozen=True)
 class Platform:
-    """One binary platform: its FMI 3 tuple, its FMI 2 folder name, Zig's target and the library suffix."""
+    """One binary platform: its FMI 3 platform tuple, its FMI 2 folder name, Zig's target and the library suffix."""
 
-    tuple: str
+    fmi3: str
     fmi2: str
     zig_target: str
     suffix: str
 
     def folder(self, fmi_version: int) -> str:
         """The ``binaries/<folder>`` name for this FMI version."""
-        return self.fmi2 if fmi_version == 2 else self.tuple
+        return self.fmi2 if fmi_version == 2 else self.fmi3
 
 
-PLATFORMS = {p.tuple: p for p in (
+PLATFORMS = {p.fmi3: p for p in (
     Platform("x86_64-linux", "linux64", "x86_64-linux-gnu.2.17", ".so"),
     Platform("x86_64-windows", "win64", "x86_64-windows-gnu", ".dll"),
     Platform("x86_64-darwin", "darwin64", "x86_64-macos.10.15", ".dylib"),
     Platform("aarch64-linux", "aarch64-linux", "aarch64-linux-gnu.2.17", ".so"),
     Platform("aarch64-darwin", "aarch64-darwin", "aarch64-macos.11.0", ".dylib"),
 )}
-_ALIASES = {**{p.fmi2: p.tuple for p in PLATFORMS.values()}, **{t: t for t in PLATFORMS}}
+_ALIASES = {**{p.fmi2: p.fmi3 for p in PLATFORMS.values()}, **{t: t for t in PLATFORMS}}
 
 
 def host_platform() -> Platform:
@@ -115,7 +115,7 @@ def zig_executable() -> Path:
     return zig
 
 
-def cross_flags(flags: Sequence[str]) -> list[str]:
+def portable_flags(flags: Sequence[str]) -> list[str]:
     """``flags`` without the ones chosen for the host's machine (``-march=``, ``-mavx2``, ...)."""
     return [f for f in flags if not f.startswith("-m")]
 
@@ -127,7 +127,7 @@ def cross_compile(target: Platform, sources: Sequence[Path], output: Path, *, in
     output.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="nnfmu-zig-") as tmp:
         built = Path(tmp) / output.name  # zig also writes .pdb/.lib beside a DLL: keep the library only
-        args = ["cc", "-target", target.zig_target, *cross_flags(flags), "-shared",
+        args = ["cc", "-target", target.zig_target, *portable_flags(flags), "-shared",
                 *(f"-I{d}" for d in include_dirs), *map(str, sources), "-o", str(built), "-lm"]
         compiler.run_compiler(args, what=what, compiler=str(zig))
         shutil.move(str(built), output)
@@ -193,12 +193,12 @@ def prepare(targets: Sequence[Platform] | None = None, echo: Callable[[str], Non
         program.write_text("#include <stdio.h>\nint main(void) { printf(\"ok\\n\"); return 0; }\n", encoding="utf-8")
         for target in targets:
             start = time.perf_counter()
-            build_fmu(model, Path(tmp) / f"{target.tuple}.fmu", platforms=[target.tuple])
+            build_fmu(model, Path(tmp) / f"{target.fmi3}.fmu", platforms=[target.fmi3])
             libs = ["-ldl"] if target.suffix == ".so" else []
             compiler.run_compiler(["cc", "-target", target.zig_target, "-std=c99", "-O2", str(program), "-o",
-                                   str(Path(tmp) / f"{target.tuple}.exe"), *libs],
-                                  what=f"preparing Zig for {target.tuple}", compiler=str(zig_executable()))
-            echo(f"zig is ready for {target.tuple} ({time.perf_counter() - start:.0f} s)")
+                                   str(Path(tmp) / f"{target.fmi3}.exe"), *libs],
+                                  what=f"preparing Zig for {target.fmi3}", compiler=str(zig_executable()))
+            echo(f"zig is ready for {target.fmi3} ({time.perf_counter() - start:.0f} s)")
 
 
 if __name__ == "__main__":  # python -m nnfmu.export.platforms (make test runs it once)

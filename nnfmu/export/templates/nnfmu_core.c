@@ -294,13 +294,13 @@ nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned l
   if ((g = find_group(vr, &i)) == NULL)
     return vr == NNFMU_VR_MAX_SAMPLES || vr == NNFMU_VR_RANGE_ERROR ? wrong_type(inst, caller, vr)
                                                                      : unknown_vr(inst, caller, vr);
-  if (g->kind != KIND_INPUT && inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
   if (g->kind == KIND_OUTPUT)
     return nnfmu_error(inst, "%s: %s is an output and cannot be set; set %s for the initial output", caller,
                        g->names[i], nnfmu_y_start_names[i]);
   if (g->kind == KIND_FIXED && !(inst->v.mode & FIXED))
     return nnfmu_error(inst, "%s: %s is a fixed parameter; set it before exitInitializationMode, or call reset "
                        "first", caller, g->names[i]);
+  if (g->kind == KIND_TUNABLE && inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
   group_values(&inst->v, g)[i] = value;
   return NNFMU_OK;
 }

@@ -250,7 +250,7 @@ nnfmu_status nnfmu_me_get_real(nnfmu_instance *inst, const char *caller, unsigne
   status = evaluate(inst, caller);
   if (status == NNFMU_ERROR) return status;
   *value = in_range(vr, NNFMU_VR_DX, NNFMU_NX) ? ME(inst)->xdot[vr - NNFMU_VR_DX] : ME(inst)->y[vr - NNFMU_VR_Y];
-  return status;
+  return NNFMU_OK; /* an input outside its range was logged; getDerivatives and doStep return the Warning */
 }
 
 nnfmu_status nnfmu_me_refuse_set(nnfmu_instance *inst, const char *caller, unsigned long vr) {

@@ -9,8 +9,8 @@
  * - Modes: after exitInitializationMode the instance is in event mode; enterContinuousTimeMode and
  *   enterEventMode switch. The model has no event indicators, no time events and no discrete states.
  * - Inputs may be set in event and continuous-time mode; tunable parameters in event mode only.
- * - getDerivatives and the outputs guard the inputs as doStep does: a Warning once per excursion
- *   outside [min, max] (an Error with input_range_error), an Error for non-finite values.
+ * - getDerivatives guards the inputs as doStep does: a Warning, and one message per excursion, for an
+ *   input outside [min, max] (an Error with input_range_error), an Error for non-finite values.
  * - Directional derivatives: unknowns are derivatives and outputs, knowns are states and inputs,
  *   in event and continuous-time mode.
  */
