@@ -15,6 +15,7 @@ Exchange FMUs list every template).
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 
 import fmpy
@@ -26,10 +27,11 @@ from cross_tools import (Wine, binary_format, build_driver, macho_exports, outpu
 from fmpy.validation import validate_fmu
 from fmu_cases import unzipped
 
+from nnfmu.cli import main as nnfmu_main
 from nnfmu.export.__main__ import main as export_main
 from nnfmu.export.compiler import run_compiler
 from nnfmu.export.fmu import fmi_header_dir
-from nnfmu.export.platforms import PLATFORMS
+from nnfmu.export.platforms import PLATFORMS, host_platform, parse_platforms, portable_flags
 from nnfmu.models import ModelConfig, build_model, save_checkpoint
 
 FMI2_NAMES = "linux64,win64,darwin64,aarch64-linux,aarch64-darwin"
@@ -151,3 +153,15 @@ def test_macos_dylibs_export_the_fmi_functions(fmus, version, platform):
     assert set(FMI_FUNCTIONS[version]) <= exported
     assert not [name for name in exported if name.startswith(("nnfmu_", "casadi_"))]  # the model's code stays inside
     assert signed or platform == "x86_64-darwin"  # arm64 code must carry (at least an ad-hoc) signature
+
+
+def test_platform_names_flags_and_a_missing_toolchain(monkeypatch, tmp_path, capsys):
+    assert [p.fmi3 for p in parse_platforms("linux64, x86_64-windows,win64")] == ["x86_64-linux", "x86_64-windows"]
+    assert len(parse_platforms("all")) == 5 and parse_platforms(None) == (host_platform(),)
+    assert portable_flags(["-O3", "-march=native", "-mavx2", "-mfma", "-std=c99"]) == ["-O3", "-std=c99"]
+    assert nnfmu_main(["physics-fmu", "valve", "-o", str(tmp_path / "v.fmu"), "--platforms", "linux64,sparc"]) == 2
+    assert "unknown platform 'sparc'; choose from host, all, aarch64-darwin" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "ziglang", None)  # as if the extra 'cross' were not installed
+    assert nnfmu_main(["physics-fmu", "valve", "-o", str(tmp_path / "v.fmu"), "--platforms", "win64"]) == 2
+    assert "needs the Zig toolchain: pip install 'nnfmu[cross]'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -116,7 +116,7 @@ def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_pa
     code = codegen.generate_c(model, sources, prefix, speed_patch=speed_patch)
     entry_points, structure, me_files = dict(code.entry_points), None, ()
     if with_me:
-        entry_points.update(_model_exchange.generate_c(model, sources, prefix, speed_patch=speed_patch).entry_points)
+        entry_points.update(_model_exchange.generate_c(model, sources, prefix, speed_patch=speed_patch))
         structure = _model_exchange.continuous_structure(model)
         me_files = (*_model_exchange.ME_TEMPLATES, *_model_exchange.ME_WRAPPER[fmi_version])
     templates = resources.files("nnfmu.export") / "templates"

@@ -20,7 +20,6 @@ describes the behaviour.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
@@ -31,20 +30,12 @@ from nnfmu.export.codegen import patch_source
 from nnfmu.export.model_description import ContinuousStructure, FmuDescription, num
 from nnfmu.system import CasadiModel
 
-ME_C = "model_me_casadi.c"
-ME_H = "model_me_casadi.h"
+ME_C = "model_me_casadi.c"  # and model_me_casadi.h
 #: Templates for every FMU with Model Exchange, and each FMI version's entry points.
 ME_TEMPLATES = ("nnfmu_me.h", "nnfmu_me.c", "nnfmu_me_model.c")
 ME_WRAPPER = {2: ("nnfmu_fmi2_me.c",), 3: ("nnfmu_fmi3_me.c",)}
 #: Compiled (nnfmu_me_model.c includes the generated model_me_casadi.c, as nnfmu_model.c does).
 ME_SOURCES = ("nnfmu_me_model.c", "nnfmu_me.c")
-
-
-@dataclass(frozen=True)
-class GeneratedMe:
-    """What :func:`generate_c` wrote: the C entry points (macro -> symbol) of ``me`` and ``jvp``."""
-
-    entry_points: dict[str, str]
 
 
 def _symbols(fn: ca.Function):
@@ -69,8 +60,9 @@ def me_functions(model: CasadiModel, prefix: str) -> tuple[ca.Function, ca.Funct
     return me, jvp
 
 
-def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True) -> GeneratedMe:
-    """Write ``model_me_casadi.c``/``.h`` (``me`` and ``jvp``, symbols ``<prefix>_me_*``) into ``directory``."""
+def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True) -> dict[str, str]:
+    """Write ``model_me_casadi.c``/``.h`` (``me`` and ``jvp``, symbols ``<prefix>_me_*``) into ``directory``;
+    return their C entry points for ``nnfmu_model.h`` (macro -> symbol)."""
     me, jvp = me_functions(model, prefix)
     generator = ca.CodeGenerator(ME_C, {"with_header": True, "verbose": False, "prefix": f"{prefix}_me"})
     try:
@@ -83,8 +75,7 @@ def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch:
     path = Path(directory) / ME_C
     path.write_text(patch_source(path.read_text(encoding="utf-8"), speed_patch=speed_patch), encoding="utf-8")
     entry = {"NNFMU_ME": me.name(), "NNFMU_JVP": jvp.name()}
-    entry.update({f"{macro}_WORK": f"{symbol}_work" for macro, symbol in list(entry.items())})
-    return GeneratedMe(entry)
+    return {**entry, **{f"{macro}_WORK": f"{symbol}_work" for macro, symbol in entry.items()}}
 
 
 def _structural(fn: ca.Function, out: int, ins: dict[int, str]) -> list[tuple[tuple[str, int], ...]]:
