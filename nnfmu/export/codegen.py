@@ -128,6 +128,8 @@ void casadi_mtimes_dense(const casadi_real* NNFMU_RESTRICT x, casadi_int nrow_x,
 
 _DENSE_HELPER = re.compile(r"^void casadi_mtimes_dense\(.*?^}\n", re.S | re.M)
 _MODEL_FUNCTION = re.compile(r"^static int (casadi_f\d+)\(", re.M)
+_STEP_ENTRY = re.compile(r"_(?:entry|f32)_step\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
+                         r"casadi_real\* w, int mem\)\s*\{\s*return (casadi_f\d+)\(")
 _MUTABLE_STATIC = re.compile(r"^\s*static\s+(?!const\b)[^(\n]*[;=]", re.M)
 _INCLUDE = re.compile(r"^#include .*\n", re.M)
 
@@ -199,7 +201,13 @@ def patch_source(source: str, *, speed_patch: bool = True, profile: str = "fast"
                       "correct but its step is not vectorised (expected CasADi 3.8.x)", stacklevel=3)
     if fast:
         source = panels.use_fast_math(panels.panelize(source, precision))
-    return _MODEL_FUNCTION.sub(r"NNFMU_CLONES\nstatic int \1(", source)
+    step = _STEP_ENTRY.search(source)  # clone the step only: init runs once, and each clone costs compile time
+
+    def clone(match: re.Match) -> str:
+        cloned = step is None or match.group(1) == step.group(1)
+        return f"{'NNFMU_CLONES' + chr(10) if cloned else ''}static int {match.group(1)}("
+
+    return _MODEL_FUNCTION.sub(clone, source)
 
 
 def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True,
