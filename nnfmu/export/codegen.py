@@ -15,8 +15,8 @@ still adds its products in CasADi's order.
   ``csrc/nnfmu_fast.h``, stores the weight constants as row panels and calls
   their products through its register-blocked kernel (:mod:`.panels`),
   evaluates exp, tanh, fmax and fmin with its branch-free versions, and clones
-  the model functions for x86-64-v3 (AVX2 + FMA) and x86-64-v4 (AVX-512)
-  next to the portable baseline. Compiled with ``-ffp-contract=fast``, each
+  the step function for x86-64-v3 (AVX2 + FMA) and x86-64-v4 (AVX-512) next
+  to the portable baseline. Compiled with ``-ffp-contract=fast``, each
   product-add rounds once and exp/tanh differ from libm by at most 1 and 3
   ulp: agreement with CasADi and torch becomes a tolerance (docs/fmu-speed.md).
 - ``precision="float32"``: CasADi writes the model in ``float``, behind
@@ -87,9 +87,9 @@ _PREAMBLE = r"""
 """
 
 _CLONES = {
-    "exact": ('"avx2", "default"', "an AVX2 clone of each model function next to the baseline one (no FMA, "
+    "exact": ('"avx2", "default"', "an AVX2 clone of the step function next to the baseline one (no FMA, "
               "so the\n   results are the same bits)."),
-    "fast": ('"arch=x86-64-v4", "arch=x86-64-v3", "default"', "AVX-512 and AVX2+FMA clones of each model "
+    "fast": ('"arch=x86-64-v4", "arch=x86-64-v3", "default"', "AVX-512 and AVX2+FMA clones of the step "
              "function next to the baseline one."),
 }
 
