@@ -9,7 +9,9 @@ Measured, all in process CPU time on one pinned core (``taskset``), in
 ``--rounds`` rounds that interleave every case (the median is printed):
 
 - each FMU's step in C: ``c/fmu_step_driver.c`` dlopens the binary and loops
-  fmi2SetReal + fmi2DoStep(Ts) + fmi2GetReal, 3500 steps, after a warm-up run;
+  fmi2SetReal + fmi2DoStep(Ts) + fmi2GetReal, 3500 steps, after a warm-up run
+  (each round's figure is the least of 3 runs in one process: the run other
+  processes disturbed least);
 - the peak of the core: independent chains of AVX2 FMA, AVX2 multiply + add
   (what a build without FMA executes) and AVX-512 FMA (``c/peak.c``);
 - the read bandwidth from the cache that holds each network's weights: a step

@@ -9,7 +9,8 @@
  *
  * usage: gru_hand N_STEPS  ->  us_per_step=<t> y_final=<y1>,<y2>,...
  * The inputs are the same sinusoids as in fmu_step_driver.c, computed before the timed loop, and
- * y0 = 0 (physical units). One run warms the caches, the second is timed in process CPU time.
+ * y0 = 0 (physical units). One run warms the caches, the least of three timed ones (process CPU
+ * time) is printed, as in fmu_step_driver.c.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <math.h>
@@ -59,7 +60,7 @@ static void gru_step(const double *restrict yn, const double *restrict un, const
 }
 
 int main(int argc, char **argv) {
-  double yn[NY], yn_next[NY], h[H], h_next[H], un[NU], t0 = 0.0, *inputs;
+  double yn[NY], yn_next[NY], h[H], h_next[H], un[NU], t0 = 0.0, best = 1e300, *inputs;
   long n_steps, k;
   int i, pass;
   if (argc != 2) {
@@ -71,7 +72,7 @@ int main(int argc, char **argv) {
   if (!inputs) return 2;
   for (k = 0; k < n_steps; ++k)
     for (i = 0; i < NU; ++i) inputs[k * NU + i] = sin(0.01 * (double)k * (i + 1)) * (1.0 + 0.5 * i);
-  for (pass = 0; pass < 2; ++pass) {
+  for (pass = 0; pass < 4; ++pass) { /* pass 0 warms the caches */
     for (i = 0; i < NY; ++i) yn[i] = (0.0 - y_mean[i]) / y_std[i];
     memset(h, 0, sizeof h);
     t0 = cpu_seconds();
@@ -82,8 +83,9 @@ int main(int argc, char **argv) {
       memcpy(h, h_next, sizeof h);
     }
     t0 = cpu_seconds() - t0;
+    if (pass && t0 < best) best = t0;
   }
-  printf("us_per_step=%.4f y_final=", t0 / (double)n_steps * 1e6);
+  printf("us_per_step=%.4f y_final=", best / (double)n_steps * 1e6);
   for (i = 0; i < NY; ++i) printf("%s%.17g", i ? "," : "", yn[i] * y_std[i] + y_mean[i]);
   printf("\n");
   free(inputs);
