@@ -5,7 +5,8 @@
 - exact: the same bits as CasADi's own evaluation;
 - float32: within 1e-5 of the float64 torch model, and costs less than 1e-3 free-run NRMSE on the valve
   test set against the float64 FMU;
-- the weight panels are right for awkward matrix shapes, in both precisions.
+- the weight panels are right for awkward matrix shapes, in both precisions;
+- the incremental TCN predicts what the windowed TCN predicts, with one column per layer and step.
 """
 
 from __future__ import annotations
@@ -137,6 +138,24 @@ def test_weight_panels_are_right_for_awkward_shapes(tmp_path, options, tolerance
     u = np.sin(0.3 * np.arange(60))[:, None]
     y0 = np.linspace(-1, 1, model.spec.n_y)
     assert rel_error(fmpy_simulate(fmu, model, u, y0)[1:], model.simulate(u, y0)[1:]) < tolerance
+
+
+@pytest.mark.parametrize("options", [dict(), dict(kernel_size=2, layers=4), dict(layers=1),
+                                     dict(layers=2, activation="relu", skip=False)])
+def test_incremental_tcn_predicts_what_the_windowed_tcn_predicts(options):
+    """The delay-line step (torch and FMU) against the TCN evaluated over its whole window at every step."""
+    from nnfmu.models import WindowStepModel
+
+    torch.manual_seed(2)
+    model = build_model(ModelConfig(arch="tcn", n_u=2, n_y=2, hidden=6, **options)).double().eval()
+    model.set_normalisation(NORM)
+    u = torch.from_numpy(np.array(NORM["u_mean"]) + np.array(NORM["u_std"]) * np.random.default_rng(0).normal(
+        size=(1, 200, 2)))
+    y0 = torch.tensor([[6e-4, 3e5]], dtype=torch.float64)
+    with torch.no_grad():
+        incremental = model(u, y0)
+        windowed = WindowStepModel._free_run_norm(model, model.normalise_u(u), model.normalise_y(y0))
+    assert rel_error(incremental[0, 1:].numpy(), model.denormalise_y(windowed[0, 1:]).numpy()) < 1e-12
 
 
 def test_tcn_step_computes_one_column_per_layer(networks):
