@@ -270,7 +270,8 @@ def targets(rows: dict, peak: float) -> None:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", type=int, default=[16, 32, 64, 128, 256], help="GRU hidden sizes")
-    parser.add_argument("--archs", nargs="*", default=["mlp", "rnn", "lstm", "tcn"], choices=["mlp", "rnn", "lstm", "tcn"])
+    parser.add_argument("--archs", nargs="*", default=["mlp", "rnn", "lstm", "tcn"],
+                        choices=["mlp", "rnn", "lstm", "tcn"], help="other architectures, at hidden 32")
     parser.add_argument("--steps", type=int, default=3500)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)), help="the core to pin to")
