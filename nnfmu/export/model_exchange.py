@@ -60,9 +60,15 @@ def me_functions(model: CasadiModel, prefix: str) -> tuple[ca.Function, ca.Funct
     return me, jvp
 
 
-def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True) -> dict[str, str]:
+def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True,
+               profile: str = "fast") -> dict[str, str]:
     """Write ``model_me_casadi.c``/``.h`` (``me`` and ``jvp``, symbols ``<prefix>_me_*``) into ``directory``;
-    return their C entry points for ``nnfmu_model.h`` (macro -> symbol)."""
+    return their C entry points for ``nnfmu_model.h`` (macro -> symbol).
+
+    ``profile`` is the co-simulation step's (:mod:`nnfmu.export.codegen`); the ODE and its derivatives are
+    always computed in float64, whatever the step's precision: the importer's solver needs them to tolerances
+    far below float32's resolution.
+    """
     me, jvp = me_functions(model, prefix)
     generator = ca.CodeGenerator(ME_C, {"with_header": True, "verbose": False, "prefix": f"{prefix}_me"})
     try:
@@ -73,7 +79,8 @@ def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch:
         raise FmuBuildError(f"CasADi cannot generate C code for the ODE of {model.spec.name!r}: {exc}; build "
                             f"the ODE from code-generatable operations") from exc
     path = Path(directory) / ME_C
-    path.write_text(patch_source(path.read_text(encoding="utf-8"), speed_patch=speed_patch), encoding="utf-8")
+    source = patch_source(path.read_text(encoding="utf-8"), speed_patch=speed_patch, profile=profile)
+    path.write_text(source, encoding="utf-8")
     entry = {"NNFMU_ME": me.name(), "NNFMU_JVP": jvp.name()}
     return {**entry, **{f"{macro}_WORK": f"{symbol}_work" for macro, symbol in entry.items()}}
 

@@ -18,8 +18,9 @@ macOS ARM64        aarch64-darwin (no FMI 2 name) aarch64-macos.11.0
 FMI 2.0 names x86 platforms only; for ARM64 nnfmu uses the FMI 3 tuple in FMI 2 FMUs
 too, as fmpy does when it lists an FMU's platforms. ``--platforms`` accepts either
 spelling, ``host`` (the default: this machine only) and ``all``. Cross-compiled binaries
-get the portable flags only: flags chosen for the host's machine (``-march``, ``-m...``)
-are not passed on, and the model code's x86 runtime dispatch is guarded in the C itself.
+get the build profile's portable flags only: flags chosen for the host's machine
+(``-march``, ``-m...``) are not passed on, and the fast profile's x86 clones are guarded in
+the C itself (x86-64 glibc only, where ifunc dispatches them; the portable code elsewhere).
 """
 
 from __future__ import annotations
