@@ -2,7 +2,7 @@
 
 - the test importer tests/c/fmu_driver.c built for a target with ``zig cc``;
 - Wine (Debian's ``wine``) for Windows, QEMU user mode (``qemu-user``) with Debian's aarch64 C library
-  (``libc6-arm64-cross``) for ARM64 Linux: ``make test`` installs them where it can; a test that cannot
+  (``libc6-arm64-cross``) for ARM64 Linux: ``make setup`` installs them where it can; a test that cannot
   run one skips that part and names the package;
 - binary headers (ELF, PE, Mach-O) and a Mach-O symbol table reader for the macOS binaries;
 - the strict-C check of the shipped sources (C99 without GNU extensions or VLAs, as MSVC needs).
@@ -74,15 +74,15 @@ class Wine:
 
 def wine_or_skip() -> None:
     if not (shutil.which("wine") and shutil.which("wineserver")):
-        pytest.skip("Wine is not installed (Debian package 'wine'; make test installs it where apt-get runs as root)")
+        pytest.skip("Wine is not installed (Debian package 'wine'; make setup installs it where apt-get runs as root)")
 
 
 def qemu_or_skip() -> list[str]:
     """``qemu-aarch64 -L <sysroot>``: runs an aarch64 glibc program."""
     if not shutil.which("qemu-aarch64"):
-        pytest.skip("QEMU user mode is not installed (Debian package 'qemu-user'; make test installs it as root)")
+        pytest.skip("QEMU user mode is not installed (Debian package 'qemu-user'; make setup installs it as root)")
     if not (AARCH64_SYSROOT / "lib" / "ld-linux-aarch64.so.1").exists():
-        pytest.skip(f"no aarch64 C library at {AARCH64_SYSROOT} (Debian package 'libc6-arm64-cross'; make test "
+        pytest.skip(f"no aarch64 C library at {AARCH64_SYSROOT} (Debian package 'libc6-arm64-cross'; make setup "
                     f"installs it as root)")
     return ["qemu-aarch64", "-L", str(AARCH64_SYSROOT)]
 
