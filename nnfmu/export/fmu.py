@@ -4,7 +4,10 @@ The FMU holds CasADi-generated C for ``init`` and ``step`` (``model_casadi.c``)
 and nnfmu's hand-written FMI wrapper (``templates/``: one shared core, FMI 2.0
 and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
 e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
-compiled with the system C compiler. No Python, no libtorch inside.
+compiled with the system C compiler, or for several (``platforms``: the others
+cross-compiled with Zig, :mod:`nnfmu.export.platforms`). A continuous-time model
+also gets Model Exchange (:mod:`nnfmu.export.model_exchange`). No Python, no
+libtorch inside.
 
 Behaviour of the FMU (the reference is docs/fmu.md; the C side is ``templates/nnfmu_core.h``):
 
