@@ -82,6 +82,11 @@ static nnfmu_status check_range(nnfmu_instance *inst, const char *caller, double
   return status;
 }
 
+nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t) {
+  if (check_finite(inst, caller, t) != NNFMU_OK) return NNFMU_ERROR;
+  return check_range(inst, caller, t);
+}
+
 static int eval_init(nnfmu_instance *inst, const double *u0, double *x0) {
   inst->arg[0] = inst->v.y_start;
   inst->arg[1] = u0;
