@@ -12,7 +12,8 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
   :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
 - linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
 - physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`; :func:`sx_to_torch`
-- the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
+- the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`,
+  :class:`ContinuousDynamics` (the ODE of a continuous-time model)
 - errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
 """
 
@@ -36,6 +37,7 @@ _LAZY = {
     "nrmse": "nnfmu.metrics",
     "NrmseResult": "nnfmu.metrics",
     "CasadiModel": "nnfmu.system",
+    "ContinuousDynamics": "nnfmu.system",
     "SystemSpec": "nnfmu.system",
     "Variable": "nnfmu.system",
     "NnfmuError": "nnfmu.errors",

@@ -3,7 +3,10 @@
 Trains one network with the one trainer, shows a progress bar with the loss
 and the validation free-run NRMSE, writes the checkpoint after every epoch,
 and prints the free-run test NRMSE of the best weights. Ctrl-C (or SIGTERM)
-stops and keeps the best checkpoint; ``--resume`` continues it.
+stops and keeps the best checkpoint (exit status 130, or 143 for SIGTERM);
+``--resume`` continues it. A run that fails or stops before its first epoch
+finishes leaves nothing at ``--out``; sizes are checked against
+:mod:`nnfmu.limits` before anything is allocated.
 
 ``--arch hybrid --physics valve|arm [--physics-params FILE.json] [--train-physics NAME,...]``
 trains a physics model plus a neural correction (:mod:`nnfmu.hybrid`): parallel strategy only,
@@ -169,10 +172,13 @@ def _differs(config, key: str, value) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import signal
     from pathlib import Path
 
+    from nnfmu.cli._outputs import remove_if_untrained
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
     from nnfmu.models import load_checkpoint
     from nnfmu.training import train
 
@@ -185,15 +191,28 @@ def _run(args: argparse.Namespace) -> int:
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
     hybrid = model_config.arch == "hybrid"
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
-    result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
-                   device=device, threads=args.threads)
+    check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
+    check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    try:
+        result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
+                       device=device, threads=args.threads)
+    except BaseException:
+        if not args.resume:  # a failed command leaves nothing at --out unless an epoch finished
+            remove_if_untrained(out)
+        raise
     for note in result.notes:
         print(f"note: {note}")
+    if result.stop_reason in ("SIGINT", "SIGTERM"):
+        status = 128 + getattr(signal, result.stop_reason)
+        if not args.resume and remove_if_untrained(out):
+            print(f"interrupted before the first epoch finished: nothing was kept at {out}")
+            return status
+        print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, validation free-run NRMSE "
+              f"{result.best_valid_nrmse:.4f}; checkpoint {out}")
+        print(f"interrupted: the best checkpoint so far is kept; continue with --resume --out {out}")
+        return status
     print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, "
           f"validation free-run NRMSE {result.best_valid_nrmse:.4f}; checkpoint {out}")
-    if result.stop_reason in ("SIGINT", "SIGTERM"):
-        print(f"interrupted: the best checkpoint so far is kept; continue with --resume --out {out}")
-        return 130
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0

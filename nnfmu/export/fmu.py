@@ -4,33 +4,36 @@ The FMU holds CasADi-generated C for ``init`` and ``step`` (``model_casadi.c``)
 and nnfmu's hand-written FMI wrapper (``templates/``: one shared core, FMI 2.0
 and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
 e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
-compiled with the system C compiler. No Python, no libtorch inside.
+compiled with the system C compiler, or for several (``platforms``: the others
+cross-compiled with Zig, :mod:`nnfmu.export.platforms`). A continuous-time model
+also gets Model Exchange (:mod:`nnfmu.export.model_exchange`). No Python, no
+libtorch inside.
 
-Behaviour of the FMU (details in ``templates/nnfmu_core.h``):
+Behaviour of the FMU (the reference is docs/fmu.md; the C side is ``templates/nnfmu_core.h``):
 
-- variables: the spec's inputs and outputs (names, units, descriptions), a
-  fixed parameter ``<y>_start`` per output (the initial output y0, start = the
-  output Variable's ``start``), the spec's parameters as tunable parameters
-  (they feed the ``p`` port at every sample), ``Ts`` as a constant, and
-  ``DefaultExperiment stepSize = Ts``;
-- the output at the start time is y0; the state ``x0 = init(y0, u0, p)`` is
-  computed at the first ``doStep`` from the ``<y>_start`` values and the
-  inputs set for that step (fmpy and most importers set inputs right before
-  each step, so u0 is exactly the first sample's input);
-- ``doStep(t, h)`` advances ``h / Ts`` samples with the inputs held; any other
-  ``h`` (relative tolerance 1e-9) is an error whose log message names Ts;
-- NaN or infinite inputs or results give an error status and a log message,
-  and the step is not taken; reset, FMU-state get/set/serialize and several
-  instances side by side work.
+- variables: the spec's inputs (names, units, descriptions, ``min``/``max``
+  where the spec's Variables give a valid range) and outputs, a fixed
+  parameter ``<y>_start`` per output (the initial output y0), the spec's
+  parameters as tunable parameters (they feed the ``p`` port at every sample),
+  ``Ts`` as a constant, the tunable parameters ``max_samples_per_step`` and
+  ``input_range_error``, and ``DefaultExperiment stepSize = Ts``;
+- time is counted in whole samples from the start time; ``doStep(t, h)``
+  accepts any ``h > 0`` and advances every sample instant in ``(t, t + h]``
+  with the inputs held, up to ``max_samples_per_step`` samples per call;
+- an input outside its valid range gives a Warning (an Error with
+  ``input_range_error = true``); non-finite values give an Error, and the step
+  is not taken; FMU states (also into a fresh instance), reset and several
+  instances side by side work; calls the FMI state machine forbids are Errors;
+- the listed sources build without libm at link time (``templates/nnfmu_libm.h``),
+  so fmpy's ``build_platform_binary`` or a plain ``cc -shared -fPIC`` over
+  them gives a binary that loads in any importer.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import platform
 import shutil
-import sys
 import tempfile
 import uuid
 import zipfile
@@ -38,15 +41,23 @@ from dataclasses import dataclass
 from importlib import resources
 from os import PathLike
 from pathlib import Path
+from typing import Callable, Sequence
 
 from nnfmu.atomic import write_atomic
 from nnfmu.errors import ConfigError, FmuBuildError
-from nnfmu.export import codegen, compiler, model_description
-from nnfmu.export.compiler import DEFAULT_FLAGS
+from nnfmu.export import c_header, codegen, model_description
+from nnfmu.export import model_exchange as _model_exchange
+from nnfmu.export import platforms as _platforms
+from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.system import CasadiModel
 
-TEMPLATES = ("nnfmu_core.h", "nnfmu_core.c")
-WRAPPER = {2: ("nnfmu_fmi2.c",), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
+TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c",
+             "nnfmu_state.c", "nnfmu_libm.c")
+#: Compiled, in this order; model_casadi.c is not listed: nnfmu_model.c includes it (see nnfmu_libm.h).
+CORE_SOURCES = ("nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c", "nnfmu_state.c", "nnfmu_libm.c")
+#: nnfmu's own build links libm, so the model code calls it directly.
+OWN_BUILD_DEFINES = ("-DNNFMU_LINKS_LIBM",)
+WRAPPER = {2: ("nnfmu_fmi2.h", "nnfmu_fmi2.c"), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 
@@ -62,22 +73,33 @@ class BuildOptions:
     target_isa : str or None
         ``-march`` value for the whole binary, e.g. ``"x86-64-v3"`` or ``"native"``.
         Default None: the compiler's portable baseline, with the model functions
-        dispatched at load time to an AVX2 clone where the CPU has one (x86-64
+        dispatched at load time to clones for the instruction sets the CPU has (x86-64
         Linux), which is nearly as fast and runs on any x86-64 machine.
-    flags : tuple of str
-        Compiler flags before ``-march``; see :data:`nnfmu.export.compiler.DEFAULT_FLAGS`.
+    profile : {"fast", "exact"}
+        "fast" (default): FMA contraction, vectorised exp/tanh, weights in row panels and
+        AVX2+FMA / AVX-512 clones; agrees with torch to a documented tolerance. "exact": the
+        same bits as CasADi's own evaluation. See docs/fmu-speed.md and :mod:`nnfmu.export.codegen`.
+    precision : {"float64", "float32"}
+        What the step computes in; the FMU's variables are float64 either way.
+    flags : tuple of str or None
+        Compiler flags before ``-march``; default the profile's, see
+        :data:`nnfmu.export.compiler.PROFILE_FLAGS`.
     speed_patch : bool
-        Rewrite CasADi's dense matrix-product kernel so that it vectorises (bit-identical
-        results; see :mod:`nnfmu.export.codegen`). False keeps CasADi's code as generated,
-        for comparison only.
+        Rewrite CasADi's dense matrix-product code for speed (see :mod:`nnfmu.export.codegen`).
+        False keeps CasADi's code as generated, for comparison only.
     """
 
     compiler: str | None = None
     target_isa: str | None = None
-    flags: tuple[str, ...] = DEFAULT_FLAGS
+    profile: str = "fast"
+    precision: str = "float64"
+    flags: tuple[str, ...] | None = None
     speed_patch: bool = True
 
     def __post_init__(self) -> None:
+        codegen.check_options(self.profile, self.precision)
+        if self.flags is None:
+            object.__setattr__(self, "flags", PROFILE_FLAGS[self.profile])
         if isinstance(self.flags, str) or not all(isinstance(f, str) for f in self.flags):
             raise ConfigError(f"BuildOptions.flags must be a sequence of strings, got {self.flags!r}")
         object.__setattr__(self, "flags", tuple(self.flags))
@@ -88,15 +110,7 @@ class BuildOptions:
 
 def platform_folder(fmi_version: int) -> str:
     """``binaries/<folder>`` for this machine: FMI 2 names (linux64, ...) or FMI 3 platform tuples."""
-    machine = platform.machine().lower()
-    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
-    system = {"linux": "linux", "darwin": "darwin", "win32": "windows"}.get(sys.platform)
-    if system is None:
-        raise FmuBuildError(f"building FMUs on {sys.platform!r} is not supported; use Linux, macOS or Windows")
-    if fmi_version == 3:
-        return f"{arch}-{system}"
-    bits = "64" if arch in ("x86_64", "aarch64") else "32"
-    return {"linux": "linux", "darwin": "darwin", "windows": "win"}[system] + bits
+    return _platforms.host_platform().folder(fmi_version)
 
 
 def fmi_header_dir() -> Path:
@@ -106,27 +120,41 @@ def fmi_header_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_patch: bool):
-    """Generate and copy every C file into ``sources``; return the description and the C files to compile."""
+def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options: BuildOptions, with_me: bool):
+    """Generate and copy every C file into ``sources``; return the description and the C files to compile.
+
+    ``with_me``: add the Model Exchange interface of ``model.continuous`` (:mod:`nnfmu.export.model_exchange`).
+    """
     sources.mkdir(parents=True)
     prefix = codegen.symbol_prefix(model)
-    code = codegen.generate_c(model, sources, prefix, speed_patch=speed_patch)
+    code = codegen.generate_c(model, sources, prefix, speed_patch=options.speed_patch, profile=options.profile,
+                              precision=options.precision)
+    entry_points, structure, me_files = dict(code.entry_points), None, ()
+    if with_me:
+        entry_points.update(_model_exchange.generate_c(model, sources, prefix, speed_patch=options.speed_patch,
+                                                       profile=options.profile))
+        structure = _model_exchange.continuous_structure(model)
+        me_files = (*_model_exchange.ME_TEMPLATES, *_model_exchange.ME_WRAPPER[fmi_version])
     templates = resources.files("nnfmu.export") / "templates"
-    for name in (*TEMPLATES, *WRAPPER[fmi_version]):
+    for name in (*TEMPLATES, *WRAPPER[fmi_version], *me_files):
         (sources / name).write_text((templates / name).read_text(encoding="utf-8"), encoding="utf-8")
     for name in FMI_HEADERS[fmi_version]:
         shutil.copyfile(fmi_header_dir() / name, sources / name)
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    desc = model_description.describe(model.spec, token, stamp)
-    header = model_description.render_c_header(desc, code.n_x, code.entry_points)
+    desc = model_description.describe(model.spec, token, stamp, structure=structure)
+    header = c_header.render_c_header(desc, code.n_x, entry_points,
+                                      extra_lines=_model_exchange.c_header_lines(desc) if with_me else ())
     (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
-    c_files = [code.c_file, "nnfmu_core.c", *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
+    me_sources = _model_exchange.ME_SOURCES if with_me else ()
+    c_files = [*CORE_SOURCES, *me_sources, *(f for f in (*WRAPPER[fmi_version], *me_files)
+                                            if f.endswith(".c") and f not in me_sources)]
     return desc, c_files
 
 
-def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions) -> None:
-    desc, c_files = _write_sources(model, fmi_version, root / "sources", options.speed_patch)
+def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions, with_me: bool,
+                    targets: Sequence[_platforms.Platform], on_binary: Callable[[str, float], None] | None) -> None:
+    desc, c_files = _write_sources(model, fmi_version, root / "sources", options, with_me)
     if fmi_version == 2:
         xml = model_description.render_fmi2(desc, c_files)
     else:
@@ -134,12 +162,10 @@ def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: B
         (root / "sources" / "buildDescription.xml").write_text(
             model_description.render_build_description(desc, c_files), encoding="utf-8")
     (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
-    binary = root / "binaries" / platform_folder(fmi_version) / (
-        desc.model_identifier + compiler.shared_library_suffix())
-    compiler.compile_shared_library(
-        [root / "sources" / f for f in c_files], binary, include_dirs=[root / "sources"],
-        flags=options.compile_flags(), compiler=options.compiler,
-        what=f"compiling the FMU binary of {model.spec.name!r}")
+    _platforms.build_binaries(root, desc.model_identifier, [root / "sources" / f for f in c_files], fmi_version,
+                             targets, host_flags=[*options.compile_flags(), *OWN_BUILD_DEFINES],
+                             cross_flags=[*options.flags, *OWN_BUILD_DEFINES], compiler_command=options.compiler,
+                             on_binary=on_binary)
 
 
 def _zip_tree(root: Path, archive: Path) -> None:
@@ -150,8 +176,10 @@ def _zip_tree(root: Path, archive: Path) -> None:
 
 
 def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
-              options: BuildOptions | None = None) -> Path:
-    """Write ``model`` as a co-simulation FMU to ``out`` and return its path.
+              options: BuildOptions | None = None, model_exchange: bool = True,
+              platforms: str | Sequence[str] | None = None,
+              on_binary: Callable[[str, float], None] | None = None) -> Path:
+    """Write ``model`` as a co-simulation FMU to ``out`` (with Model Exchange for a continuous-time model).
 
     Parameters
     ----------
@@ -165,6 +193,16 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
         FMI 2.0 (default: every importer reads it) or FMI 3.0 co-simulation.
     options : BuildOptions, optional
         Compiler, flags and target instruction set.
+    model_exchange : bool
+        For a model with ``continuous`` dynamics (physics, derivative-corrected hybrids), also offer
+        Model Exchange (the ODE, with directional derivatives; docs/fmu-platforms.md). False, or a
+        discrete-time model: co-simulation only.
+    platforms : str or sequence of str, optional
+        The binaries to ship: names as FMI 2 or 3 spells them (``"linux64,win64,darwin64,aarch64-linux,
+        aarch64-darwin"``), ``"all"``, or None/``"host"``: this machine's only (see
+        :mod:`nnfmu.export.platforms`; others are cross-compiled with the ``ziglang`` package).
+    on_binary : callable, optional
+        Called as ``on_binary(folder, seconds)`` after each binary is compiled.
 
     Raises
     ------
@@ -179,6 +217,7 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
     if fmi_version not in WRAPPER:
         raise ConfigError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     options = options or BuildOptions()
+    targets = _platforms.parse_platforms(platforms)
     model_description.check_spec(model.spec)
     out = Path(out)
     if out.suffix.lower() != ".fmu":
@@ -186,8 +225,10 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
     if out.is_dir():
         raise FmuBuildError(f"{str(out)!r} is a folder; pass the path of the .fmu file to write")
     if not out.parent.is_dir():
-        raise FmuBuildError(f"the folder {str(out.parent)!r} for the FMU does not exist; create it first")
+        problem = "is a file, not a folder" if out.parent.exists() else "does not exist; create it first"
+        raise FmuBuildError(f"cannot write {out}: the folder {str(out.parent)!r} for the FMU {problem}")
     with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
-        _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options)
+        _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options, model_exchange and model.continuous is not None,
+                        targets, on_binary)
         write_atomic(out, lambda partial: _zip_tree(Path(tmp) / "fmu", partial))
     return out

@@ -43,6 +43,7 @@ from nnfmu.linear.statespace import (
 )
 from nnfmu.linear.subspace import fit_subspace, realise, refit_inputs, usable_columns
 from nnfmu.metrics import nrmse
+from nnfmu.valid_range import training_range
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -266,4 +267,4 @@ def identify_linear(dataset: Dataset, config: LinearConfig | None = None, *, pro
     info["nrmse_valid"] = free_run_nrmse(sys, config.init, *check)
     info["spectral_radius"] = sys.spectral_radius
     return LinearModel(scaling.physical(sys), config.init, st.y_std, dataset.Ts,
-                       dataset.inputs, dataset.outputs, info)
+                       dataset.inputs, dataset.outputs, info, tuple(training_range(dataset.train.u)))

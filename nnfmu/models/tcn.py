@@ -1,4 +1,4 @@
-"""TCN step network: dilated causal convolutions over a window (state layout: :mod:`nnfmu.models.window`).
+"""TCN step network: dilated causal convolutions over a window (step state: :mod:`nnfmu.models.tcn_state`).
 
 Layer ``i`` (``i = 0 .. layers-1``) is an ``nn.Conv1d`` with kernel size ``k``
 and dilation ``2**i``, without padding ("valid"): each layer shortens the
@@ -15,6 +15,11 @@ for the tiny per-step windows this is several times faster than
     h^(i) = h^(i-1)[..., cropped to the newest samples] + dropout(act(conv_i(h^(i-1))))   (i >= 1, residual)
     N     = head(h^(L-1)[..., newest])                                             head: Linear(H -> n_y)
     y_{k+1} = y_k + skip_scale * N   (skip=True),   N   (skip=False)
+
+Teacher forcing evaluates these over the whole padded sequence in one call. The
+step (and so the free run, a loop over it, and the exported FMU) is incremental:
+each layer keeps a delay line of its past input columns in the state and
+computes one new column per step (:mod:`nnfmu.models.tcn_state`), the same sums.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from nnfmu.models import tcn_state
+from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.mlp import activation_module
 from nnfmu.models.window import WindowStepModel
@@ -66,6 +73,27 @@ class TCNStepModel(WindowStepModel):
 
     def _predict_windows(self, window: torch.Tensor) -> torch.Tensor:
         return self.head(self._features(window)[:, -1])
+
+    # ---- the incremental step (state layout: nnfmu.models.tcn_state) -------------------------
+    @property
+    def n_x(self) -> int:
+        return tcn_state.state_size(self.config)
+
+    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        return tcn_state.init(self, yn0, un0)
+
+    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return tcn_state.step(self, x, un)
+
+    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
+
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        return StepModel._free_run_norm(self, un, yn0)  # the loop over the incremental step
+
+    def state_from_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> torch.Tensor:
+        self._check_window(yn_window, un_window)
+        return tcn_state.from_window(self, torch.cat([yn_window[:, :-1], un_window], dim=2), yn_window[:, -1])
 
     def _predict_sequence(self, padded: torch.Tensor) -> torch.Tensor:
         return self.head(self._features(padded))

@@ -1,6 +1,7 @@
-"""Window state shared by the MLP and the TCN: the last ``L`` samples of ``[y, u]``.
+"""Window models (MLP, TCN): the network sees the last ``L`` samples of ``[y, u]``.
 
-Flat state layout, all in normalised units (what the FMU carries)::
+The MLP's flat state, in normalised units (what the FMU carries), is that window
+(the TCN keeps delay lines instead: :mod:`nnfmu.models.tcn_state`)::
 
     x = [ y_{k-L+1} | ... | y_k   (L * n_y) | u_{k-L+1} | ... | u_{k-1}   ((L-1) * n_u) ]
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import torch
 
+from nnfmu.errors import ShapeError
 from nnfmu.models.base import StepModel
 
 
@@ -68,6 +70,18 @@ class WindowStepModel(StepModel):
             ys.append(yn)
             samples = window[:, 1:]
         return torch.stack(ys, dim=1)
+
+    def state_from_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> torch.Tensor:
+        """The state at step k from a measured window, normalised: ``y_{k-L+1..k}`` (B, L, n_y) and
+        ``u_{k-L+1..k-1}`` (B, L-1, n_u), oldest first -> ``x`` (B, n_x)."""
+        self._check_window(yn_window, un_window)
+        return torch.cat([yn_window.flatten(1), un_window.flatten(1)], dim=1)
+
+    def _check_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> None:
+        c = self.config
+        if tuple(yn_window.shape[1:]) != (c.window, c.n_y) or tuple(un_window.shape[1:]) != (c.window - 1, c.n_u):
+            raise ShapeError(f"the window has shapes {tuple(yn_window.shape)} and {tuple(un_window.shape)}, expected "
+                             f"(B, {c.window}, {c.n_y}) and (B, {c.window - 1}, {c.n_u})")
 
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         split = self.config.window * self.config.n_y

@@ -40,6 +40,7 @@ from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
+from nnfmu.valid_range import training_range
 
 Callback = Callable[[int, dict], None]
 
@@ -83,11 +84,12 @@ class TrainResult:
 
 
 def dataset_meta(ds: Dataset, arch: str) -> dict:
-    """The model's ``meta``: name, Ts, channels and (JSON-clean) provenance of the dataset."""
+    """The model's ``meta``: name, Ts, channels, (JSON-clean) provenance and the training input range."""
     source = json.loads(json.dumps(dict(ds.source), default=_jsonable))
     system = source.get("system") or source.get("name") or source.get("kind") or "model"
     return {"name": f"{system}_{arch}", "Ts": float(ds.Ts), "inputs": [c.to_json() for c in ds.inputs],
-            "outputs": [c.to_json() for c in ds.outputs], "source": source}
+            "outputs": [c.to_json() for c in ds.outputs], "source": source,
+            "input_range": training_range(ds.train.u)}  # the FMU's valid input range (nnfmu.valid_range)
 
 
 def _jsonable(v):

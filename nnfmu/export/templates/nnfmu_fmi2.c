@@ -1,24 +1,18 @@
-/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
- * Only Real variables exist; the other types accept empty requests and reject the rest. */
+/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
+ * FMI 2 types and calls the core, which checks the state machine and does the work. FMUs of
+ * continuous-time models add the Model Exchange entry points of nnfmu_fmi2_me.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
-#include "fmi2Functions.h"
-#include "nnfmu_core.h"
-
-/* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
-typedef struct {
-  fmi2CallbackLogger logger;
-  fmi2ComponentEnvironment environment;
-} logger_env;
-
-typedef struct {
-  logger_env le;
-  nnfmu_instance *core;
-} fmi2_instance;
-
-#define INSTANCE (((fmi2_instance *)c)->core)
-#define CHECK_INSTANCE() if (!c) return fmi2Error
+#include "nnfmu_fmi2.h"
+#ifdef NNFMU_MODEL_EXCHANGE
+#include "nnfmu_me.h"
+#define INTERFACES "co-simulation and model exchange"
+#define OFFERED(type) ((type) == fmi2CoSimulation || (type) == fmi2ModelExchange)
+#else
+#define INTERFACES "co-simulation only (fmuType = fmi2CoSimulation)"
+#define OFFERED(type) ((type) == fmi2CoSimulation)
+#endif
 
 /* The core hands over finished messages; FMI 2 loggers read them as printf formats (the core removed
  * every '%'), so the message itself is the format. */
@@ -40,9 +34,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
   (void)visible;
   le.logger = functions ? functions->logger : NULL;
   le.environment = functions ? functions->componentEnvironment : NULL;
-  if (fmuType != fmi2CoSimulation) {
-    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName,
-                    "fmi2Instantiate: this FMU supports co-simulation only (fmuType = fmi2CoSimulation)");
+  if (!OFFERED(fmuType)) {
+    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName, "fmi2Instantiate: this FMU supports " INTERFACES);
     return NULL;
   }
   inst = (fmi2_instance *)calloc(1, sizeof *inst);
@@ -53,6 +46,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     free(inst);
     return NULL;
   }
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (fmuType == fmi2ModelExchange) nnfmu_me_select(inst->core);
+#endif
   return inst;
 }
 
@@ -105,7 +101,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   size_t i;
   CHECK_INSTANCE();
   for (i = 0; i < nvr; ++i)
-    if (nnfmu_get(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
+    if (nnfmu_get_real(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
 }
 
@@ -113,40 +109,59 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   size_t i;
   CHECK_INSTANCE();
   for (i = 0; i < nvr; ++i)
-    if (nnfmu_set(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+    if (nnfmu_set_real(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
 }
 
-/* Integer, Boolean and String: this FMU has none. */
-static fmi2Status no_such_type(fmi2Component c, const char *caller, size_t nvr) {
+/* Integer and Boolean: the parameters max_samples_per_step and input_range_error. */
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+  size_t i;
+  long long v;
   CHECK_INSTANCE();
-  if (nvr == 0) return fmi2OK;
-  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s: this FMU has Real variables only", caller);
+  for (i = 0; i < nvr; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi2GetInteger", NNFMU_INTEGER, vr[i], &v) != NNFMU_OK) return fmi2Error;
+    value[i] = (fmi2Integer)v;
+  }
+  return fmi2OK;
 }
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetInteger", nvr);
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi2SetInteger", NNFMU_INTEGER, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
 }
+
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetBoolean", nvr);
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi2GetBoolean", NNFMU_BOOLEAN, vr[i], &v) != NNFMU_OK) return fmi2Error;
+    value[i] = v ? fmi2True : fmi2False;
+  }
+  return fmi2OK;
 }
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi2SetBoolean", NNFMU_BOOLEAN, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
+}
+
+/* String: this FMU has none. */
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
   (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetString", nvr);
-}
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetInteger", nvr);
-}
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetBoolean", nvr);
+  CHECK_INSTANCE();
+  return nvr ? (fmi2Status)nnfmu_error(INSTANCE, "fmi2GetString: this FMU has no String variables") : fmi2OK;
 }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
   (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetString", nvr);
+  CHECK_INSTANCE();
+  return nvr ? (fmi2Status)nnfmu_error(INSTANCE, "fmi2SetString: this FMU has no String variables") : fmi2OK;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
@@ -180,15 +195,17 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 
 static fmi2Status unsupported(fmi2Component c, const char *caller, const char *why) {
   CHECK_INSTANCE();
-  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+  return (fmi2Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi2_me.c */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
   (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
   return unsupported(c, "fmi2GetDirectionalDerivative", "providesDirectionalDerivative is false");
 }
+#endif
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
@@ -224,8 +241,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
   CHECK_INSTANCE();
   if (s != fmi2LastSuccessfulTime) return unsupported(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime exists");
-  *value = nnfmu_time(INSTANCE);
-  return fmi2OK;
+  return (fmi2Status)nnfmu_last_time(INSTANCE, "fmi2GetRealStatus", value);
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {

@@ -1,13 +1,14 @@
-/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
- * Only Float64 variables exist, there is no event mode and no model exchange. Every FMI 3 function is
- * exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
+/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
+ * FMI 3 types and calls the core, which checks the state machine and does the work. Co-simulation has no
+ * event mode; FMUs of continuous-time models add Model Exchange (nnfmu_fmi3_me.c). Every FMI 3 function
+ * is exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
 #include "nnfmu_fmi3.h"
 
-static void fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
-                      const char *message) {
+void nnfmu_fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
+                     const char *message) {
   const logger_env *le = (const logger_env *)env;
   (void)instance_name;
   le->log_message(le->environment, (fmi3Status)status, category, message);
@@ -15,7 +16,7 @@ static void fmi3_sink(void *env, const char *instance_name, nnfmu_status status,
 
 fmi3Status nnfmu_fmi3_unsupported(fmi3Instance instance, const char *caller, const char *why) {
   CHECK_INSTANCE();
-  return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+  return (fmi3Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
 
 
@@ -44,14 +45,14 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
   if (eventModeUsed) {
-    nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateCoSimulation: "
+    nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateCoSimulation: "
                     "eventModeUsed must be false (hasEventMode is false) but was true");
     return NULL;
   }
   inst = (fmi3_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
   inst->le = le;
-  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? fmi3_sink : NULL, &inst->le,
+  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
                                  loggingOn);
   if (!inst->core) {
     free(inst);
@@ -60,6 +61,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   return inst;
 }
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
@@ -68,9 +70,10 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
   (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
+  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
   return NULL;
 }
+#endif
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
                                                fmi3String resourcePath, fmi3Boolean visible,
@@ -83,7 +86,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
   (void)lockPreemption; (void)unlockPreemption;
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
+  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
   return NULL;
 }
 
@@ -117,16 +120,20 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
   return (fmi3Status)nnfmu_reset(INSTANCE);
 }
 
+/* Every variable is a scalar: the value count must equal the value-reference count. */
+static fmi3Status check_count(fmi3Instance instance, const char *caller, size_t n_refs, size_t n_values) {
+  if (n_values == n_refs) return fmi3OK;
+  return (fmi3Status)nnfmu_error(INSTANCE, "%s: expected nValues = nValueReferences = %lu (all variables are "
+                                 "scalars), got %lu", caller, (unsigned long)n_refs, (unsigned long)n_values);
+}
+
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                           fmi3Float64 values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
-  if (nValues != nValueReferences)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetFloat64: expected nValues = nValueReferences "
-                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
-                                 (unsigned long)nValues);
+  if (check_count(instance, "fmi3GetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_get(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
+    if (nnfmu_get_real(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
   return fmi3OK;
 }
 
@@ -134,12 +141,58 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Float64 values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
-  if (nValues != nValueReferences)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3SetFloat64: expected nValues = nValueReferences "
-                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
-                                 (unsigned long)nValues);
+  if (check_count(instance, "fmi3SetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_set(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+    if (nnfmu_set_real(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+  return fmi3OK;
+}
+
+/* Int32 and Boolean: the parameters max_samples_per_step and input_range_error. */
+fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Int32 values[], size_t nValues) {
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3GetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi3GetInt32", NNFMU_INTEGER, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
+    values[i] = (fmi3Int32)v;
+  }
+  return fmi3OK;
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Int32 values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3SetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi3SetInt32", NNFMU_INTEGER, valueReferences[i], values[i]) != NNFMU_OK)
+      return fmi3Error;
+  return fmi3OK;
+}
+
+fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Boolean values[], size_t nValues) {
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3GetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi3GetBoolean", NNFMU_BOOLEAN, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
+    values[i] = v ? fmi3True : fmi3False;
+  }
+  return fmi3OK;
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Boolean values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3SetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi3SetBoolean", NNFMU_BOOLEAN, valueReferences[i], values[i]) != NNFMU_OK)
+      return fmi3Error;
   return fmi3OK;
 }
 
@@ -156,22 +209,18 @@ NO_VARIABLES_OF_TYPE(fmi3GetInt8, fmi3Int8)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt8, fmi3UInt8)
 NO_VARIABLES_OF_TYPE(fmi3GetInt16, fmi3Int16)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt16, fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3GetInt32, fmi3Int32)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt32, fmi3UInt32)
 NO_VARIABLES_OF_TYPE(fmi3GetInt64, fmi3Int64)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt64, fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3GetBoolean, fmi3Boolean)
 NO_VARIABLES_OF_TYPE(fmi3GetString, fmi3String)
 NO_VARIABLES_OF_TYPE(fmi3SetFloat32, const fmi3Float32)
 NO_VARIABLES_OF_TYPE(fmi3SetInt8, const fmi3Int8)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt8, const fmi3UInt8)
 NO_VARIABLES_OF_TYPE(fmi3SetInt16, const fmi3Int16)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt16, const fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3SetInt32, const fmi3Int32)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt32, const fmi3UInt32)
 NO_VARIABLES_OF_TYPE(fmi3SetInt64, const fmi3Int64)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt64, const fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3SetBoolean, const fmi3Boolean)
 NO_VARIABLES_OF_TYPE(fmi3SetString, const fmi3String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -207,7 +256,7 @@ fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueR
                                                size_t *nDependencies) {
   CHECK_INSTANCE();
   if (!nnfmu_is_output(valueReference))
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetNumberOfVariableDependencies: value reference %lu "
+    return (fmi3Status)nnfmu_error(INSTANCE, "fmi3GetNumberOfVariableDependencies: value reference %lu "
                                  "is not an output", (unsigned long)valueReference);
   *nDependencies = 0;
   return fmi3OK;
@@ -220,7 +269,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
   (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents; (void)dependencyKinds;
   CHECK_INSTANCE();
   if (!nnfmu_is_output(dependent) || nDependencies != 0)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetVariableDependencies: expected an output and "
+    return (fmi3Status)nnfmu_error(INSTANCE, "fmi3GetVariableDependencies: expected an output and "
                                  "nDependencies = 0, got value reference %lu and %lu", (unsigned long)dependent,
                                  (unsigned long)nDependencies);
   return fmi3OK;
