@@ -32,7 +32,7 @@ ARM_Y0 = np.array([10.0, -30.0, 40.0, 5.0, -20.0, 15.0])
 
 
 def model_and_batch(physics: str, batch: int, steps: int, hidden: int):
-    """A float64 hybrid with a nonzero correction, and normalised inputs and initial outputs near its operating point."""
+    """A float64 hybrid with a nonzero correction; normalised inputs and initial outputs near its operating point."""
     n = {"valve": 2, "arm": 6}[physics]
     config = HybridConfig(n_u=n, n_y=n, physics=physics, hidden=hidden)
     model = build_model(config).double().train()

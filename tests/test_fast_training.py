@@ -47,7 +47,8 @@ def test_compiled_free_run_and_its_gradients_equal_torch_in_float64(arch, activa
     inputs = [yn0, *model.parameters()]
     grads_wanted = torch.autograd.grad((wanted * weight).sum(), inputs)
     grads_got = torch.autograd.grad((got * weight).sum(), inputs)
-    assert got.shape == wanted.shape and torch.allclose(got, wanted, rtol=0, atol=1e-12 * float(wanted.detach().abs().max()))
+    scale = float(wanted.detach().abs().max())
+    assert got.shape == wanted.shape and torch.allclose(got, wanted, rtol=0, atol=1e-12 * scale)
     for a, b in zip(grads_got, grads_wanted):
         assert torch.allclose(a, b, rtol=0, atol=1e-12 * float(b.abs().max()))
 

@@ -212,10 +212,11 @@ def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float,
     with bar:
         result = refine(sys, *train, init=config.init, x0=config.refine_x0, max_radius=config.max_spectral_radius,
                         max_evaluations=config.evaluations, method=config.refine_method, report=show)
+        bar.total = bar.n  # converged before the limit: the bar ends full
     after = free_run_nrmse(result.system, config.init, *check)
     accepted = after <= before
-    report = {"x0": config.refine_x0, "method": config.refine_method, "evaluations": result.evaluations, "message": result.message,
-              "cost_before": result.cost_before, "cost_after": result.cost_after,
+    report = {"x0": config.refine_x0, "method": config.refine_method, "evaluations": result.evaluations,
+              "message": result.message, "cost_before": result.cost_before, "cost_after": result.cost_after,
               "nrmse_after": after, "accepted": bool(accepted)}
     return (result.system if accepted else sys), report
 

@@ -75,7 +75,7 @@ def training_rollout(model: StepModel, strategy: str):
 
 
 def free_run_forward(model: StepModel, u: torch.Tensor, y0: torch.Tensor) -> torch.Tensor:
-    """``model(u, y0)`` (the free run in physical units, (B, T, n_u), (B, n_y) -> (B, T, n_y)), compiled where it applies."""
+    """``model(u, y0)``: the free run in physical units, (B, T, n_u), (B, n_y) -> (B, T, n_y); compiled where it can."""
     fast = compiled_rollout(model)
     if fast is None:
         return model(u, y0)
