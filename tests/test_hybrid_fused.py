@@ -62,6 +62,11 @@ def test_active_dropout_keeps_the_stage_by_stage_path(valve_small):
     assert fused_step(sx) is None
 
 
-def test_physics_too_large_to_unroll_keep_the_stage_by_stage_path():
-    arm = build_model(HybridConfig(n_u=6, n_y=6, physics="arm", hidden=4))  # 50 sub-steps of a large ODE
-    assert fused_step(arm) is None
+def test_physics_too_large_to_unroll_keep_the_stage_by_stage_path(valve_small, monkeypatch):
+    from nnfmu.hybrid import fused
+    from nnfmu.physics import arm_system
+
+    assert 4 * 50 * arm_system().ode.n_instructions() > fused.MAX_ODE_INSTRUCTIONS  # the arm: 50 sub-steps
+    model = _hybrid(valve_small, dict(VALVE))
+    monkeypatch.setattr(fused, "MAX_ODE_INSTRUCTIONS", 4 * model.n_sub * model.physics.ode.n_instructions() - 1)
+    assert fused_step(model) is None
