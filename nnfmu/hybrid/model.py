@@ -191,7 +191,8 @@ class HybridStepModel(StepModel):
     def _plan(self, dtype: torch.dtype, fused: bool = False) -> "_Plan":
         """The correction's weights and constants for one rollout (views of the parameters, no copies).
 
-        With ``fused``, also the whole step as one compiled call where it applies (:mod:`nnfmu.hybrid.fused`).
+        With ``fused``, also the whole step as one compiled call where it applies (:mod:`nnfmu.hybrid.fused`)
+        and its input ``w``, the weights concatenated into one vector (a copy, differentiable).
         """
         layers = list(self.correction)
         first, n_x = layers[0], self.n_x
