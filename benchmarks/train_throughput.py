@@ -11,12 +11,16 @@ the same run. Pin it to one core on a shared machine::
 
     taskset -c 1 python benchmarks/train_throughput.py --compare threads
     taskset -c 1 python benchmarks/train_throughput.py --compare strategies --archs gru lstm --hidden 32
+    taskset -c 1 python benchmarks/train_throughput.py --compare paths --archs gru lstm --hidden 32
 
 Comparisons (``--compare``):
 
 - ``threads``: torch's default thread count (all cores) against one thread, the
   nnfmu default (:mod:`nnfmu.training.resources`);
-- ``strategies``: parallel against series-parallel, for each ``--archs``.
+- ``strategies``: parallel against series-parallel, for each ``--archs``;
+- ``paths``: the parallel update in torch (the free run as torch operations, AdamW's
+  default implementation: nnfmu before the compiled paths) against nnfmu's training path
+  (the compiled free run, :mod:`nnfmu.training.compiled_rollout`, and fused AdamW).
 """
 
 from __future__ import annotations
@@ -29,14 +33,24 @@ import torch
 
 from nnfmu.models import ModelConfig, build_model
 from nnfmu.training.batches import masked_mse
+from nnfmu.training.compiled_rollout import training_rollout
+from nnfmu.training.resources import adamw
 
 N_TRAJ, N_STEPS, N_U, N_Y = 900, 500, 2, 2
 DEFAULT_THREADS = torch.get_num_threads()
 
 
-def time_updates(rollout, model, un, yn, batch: int, n_batches: int) -> tuple[float, float]:
+def plain_adamw(params):
+    return torch.optim.AdamW(params, lr=1e-3)
+
+
+def nnfmu_adamw(params):
+    return adamw(params, lr=1e-3, weight_decay=0.01)  # AdamW's default weight decay, as plain_adamw
+
+
+def time_updates(rollout, model, un, yn, batch: int, n_batches: int, optimiser=plain_adamw) -> tuple[float, float]:
     """(CPU seconds, wall seconds) of ``n_batches`` optimiser steps of ``rollout(un_b, yn_b) -> pred``."""
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-3)
+    opt = optimiser(model.parameters())
     c0, t0 = time.process_time(), time.perf_counter()
     for b in range(n_batches):
         idx = slice(b * batch, (b + 1) * batch)
@@ -49,13 +63,18 @@ def time_updates(rollout, model, un, yn, batch: int, n_batches: int) -> tuple[fl
 
 
 def variants(kind: str, model, threads: int | None) -> dict:
-    """name -> (rollout, threads) of the comparison ``kind``."""
+    """name -> (rollout, threads, optimiser) of the comparison ``kind``."""
     parallel = lambda u, y: model.rollout_normalised(u, y[:, 0])  # noqa: E731
     one = threads or 1
     if kind == "threads":
-        return {f"{DEFAULT_THREADS} threads (torch default)": (parallel, DEFAULT_THREADS),
-                "1 thread (nnfmu default)": (parallel, 1)}
-    return {"parallel": (parallel, one), "series-parallel": (lambda u, y: model.rollout_normalised(u, y[:, 0], y), one)}
+        return {f"{DEFAULT_THREADS} threads (torch default)": (parallel, DEFAULT_THREADS, plain_adamw),
+                "1 thread (nnfmu default)": (parallel, 1, plain_adamw)}
+    if kind == "paths":
+        model.train()
+        return {"torch free run, AdamW": (parallel, one, plain_adamw),
+                "compiled free run, fused AdamW": (training_rollout(model, "parallel"), one, nnfmu_adamw)}
+    return {"parallel": (parallel, one, plain_adamw),
+            "series-parallel": (lambda u, y: model.rollout_normalised(u, y[:, 0], y), one, plain_adamw)}
 
 
 def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int) -> dict:
@@ -63,9 +82,9 @@ def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int)
     cpu, wall = {k: [] for k in runs}, {k: [] for k in runs}
     steps = n_batches * batch * N_STEPS
     for _ in range(repeats):
-        for name, (rollout, threads) in runs.items():
+        for name, (rollout, threads, optimiser) in runs.items():
             torch.set_num_threads(threads)
-            c, w = time_updates(rollout, model, un, yn, batch, n_batches)
+            c, w = time_updates(rollout, model, un, yn, batch, n_batches, optimiser)
             cpu[name].append(steps / c)
             wall[name].append(steps / w)
     return {k: (statistics.median(cpu[k]), statistics.median(wall[k])) for k in runs}
@@ -73,7 +92,7 @@ def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int)
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--compare", choices=["threads", "strategies"], default="threads")
+    p.add_argument("--compare", choices=["threads", "strategies", "paths"], default="threads")
     p.add_argument("--archs", nargs="+", default=["gru"])
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--batch-sizes", nargs="+", type=int, default=[64, 900])

@@ -26,8 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-refine", action="store_true", help="skip the output-error refinement")
     p.add_argument("--refine-x0", choices=["rule", "fit"], default="rule",
                    help="refinement starts each training run by the init rule (default) or fits its state")
-    p.add_argument("--max-evaluations", type=int, default=100, metavar="N",
-                   help="residual evaluations allowed to the refinement (default 100)")
+    p.add_argument("--refine-method", choices=["quasi-newton", "gauss-newton"], default="quasi-newton",
+                   help="refinement by adjoint gradients and BFGS (default; cheap evaluations) or trust-region "
+                        "Gauss-Newton (the Jacobian at every evaluation)")
+    p.add_argument("--max-evaluations", type=int, default=None, metavar="N",
+                   help="cost evaluations allowed to the refinement (default 1000 for quasi-newton, 100 for "
+                        "gauss-newton)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
     p.add_argument("--save", metavar="FILE", help="also (or only) write A, B, C, D and offsets as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bars (orders tried, refinement cost)")
@@ -72,7 +76,7 @@ def _run(args: argparse.Namespace) -> int:
         check_at_most(option, value, MAX_LINEAR_ORDER, "MAX_LINEAR_ORDER")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           refine=not args.no_refine, refine_x0=args.refine_x0,
-                          max_evaluations=args.max_evaluations)
+                          refine_method=args.refine_method, max_evaluations=args.max_evaluations)
     dataset = load_dataset(args.data)
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))

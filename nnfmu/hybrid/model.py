@@ -46,6 +46,7 @@ from torch.nn import functional as F
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.hybrid.compiled_torch import casadi_to_torch
 from nnfmu.hybrid.config import HybridConfig, physics_system
+from nnfmu.hybrid.fused import fused_step, weight_vector
 from nnfmu.models.base import StepModel
 from nnfmu.models.mlp import activation_module
 from nnfmu.physics import PhysicsSystem, rk4_step
@@ -61,6 +62,8 @@ class _Plan(NamedTuple):
     rest: list
     state_scale: torch.Tensor
     scatter: torch.Tensor
+    fused: object = None                # the whole step as one compiled call (nnfmu.hybrid.fused), or None
+    weights: torch.Tensor | None = None  # its input ``w``: the correction's weights, flattened
 
 
 class PhysicsBridge:
@@ -185,13 +188,19 @@ class HybridStepModel(StepModel):
                      for v, value in zip(self.physics.parameters, values))
 
     # ---- the correction ---------------------------------------------------------------------
-    def _plan(self, dtype: torch.dtype) -> "_Plan":
-        """The correction's weights and constants for one rollout (views of the parameters, no copies)."""
+    def _plan(self, dtype: torch.dtype, fused: bool = False) -> "_Plan":
+        """The correction's weights and constants for one rollout (views of the parameters, no copies).
+
+        With ``fused``, also the whole step as one compiled call where it applies (:mod:`nnfmu.hybrid.fused`)
+        and its input ``w``, the weights concatenated into one vector (a copy, differentiable).
+        """
         layers = list(self.correction)
         first, n_x = layers[0], self.n_x
         rest = [m for m in layers[1:] if not (type(m) is nn.Dropout and not (self.training and m.p > 0))]
+        step = fused_step(self) if fused else None
         return _Plan(first.weight[:, :n_x], first.weight[:, n_x:], first.bias, rest,
-                     self._state_scale.to(dtype), self._scatter.to(dtype))
+                     self._state_scale.to(dtype), self._scatter.to(dtype), step,
+                     None if step is None else weight_vector(self))
 
     def delta(self, x: torch.Tensor, input_term: torch.Tensor, plan: "_Plan") -> torch.Tensor:
         """Correction of the state derivative (B, n_x), zero outside ``corrected_states``.
@@ -209,6 +218,9 @@ class HybridStepModel(StepModel):
 
     def _advance(self, x, u, un, p, plan) -> tuple[torch.Tensor, torch.Tensor]:
         """One sample in physical units: ``(x_next, y_next)``."""
+        if plan.fused is not None:
+            x_next, y_next = plan.fused(x, u, un, p, plan.weights)
+            return _as(x_next, x), _as(y_next, x)
         c = F.linear(_as(un, plan.w_u), plan.w_u, plan.b)
         if self._bridge.rk4 is not None:
             x_next = _as(self._bridge.rk4(x, u, p)[0], x) + self.Ts * self.delta(x, c, plan)
@@ -233,7 +245,7 @@ class HybridStepModel(StepModel):
 
     def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
         """Free run: the same operations as :meth:`_step_norm`, with ``p`` and ``u`` computed once."""
-        p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype)
+        p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused=True)
         x = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0].to(yn0.dtype)
         ys = [yn0]
         for k in range(un.shape[1] - 1):

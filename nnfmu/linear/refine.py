@@ -1,8 +1,14 @@
 """Refinement of a linear model on its free-run simulation error (an output-error fit).
 
-``scipy.optimize.least_squares`` (trust-region reflective) minimises the sum of
-squared normalised output errors of free runs over every training trajectory
-(the sample ``k = 0``, which is the measured ``y0`` by contract, excluded).
+It minimises the sum of squared normalised output errors of free runs over every training
+trajectory (the sample ``k = 0``, which is the measured ``y0`` by contract, excluded), by one
+of two methods:
+
+- ``"quasi-newton"`` (default): :mod:`nnfmu.linear.quasi_newton` with costs by free runs and
+  exact gradients by the adjoint pass (:mod:`nnfmu.linear.adjoint`): an evaluation costs two
+  free runs, so thousands fit in the time of a hundred Gauss-Newton evaluations;
+- ``"gauss-newton"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the
+  compressed problem below: every evaluation forms ``J^T J`` (one pass per parameter direction).
 
 Initial states (``x0``):
 
@@ -45,9 +51,11 @@ import scipy.linalg.blas
 import scipy.optimize
 
 from nnfmu.errors import ConfigError
+from nnfmu.linear.adjoint import minimise_output_error
 from nnfmu.linear.statespace import StateSpace, free_run, init_gains, padded
 
 X0_OPTIONS = ("rule", "fit")
+METHODS = ("quasi-newton", "gauss-newton")
 _FD_STEP = 1e-6
 _CHUNK_SIZE = 2_000_000  # sensitivity values held per time chunk (16 MB)
 
@@ -257,8 +265,8 @@ def _observability(sys: StateSpace, n_steps: int) -> np.ndarray:
     return out
 
 
-def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: float,
-           max_evaluations: int, report: Callable[[int, float, float], None] | None = None) -> RefineResult:
+def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: float, max_evaluations: int,
+           method: str = "quasi-newton", report: Callable[[int, float, float], None] | None = None) -> RefineResult:
     """Fit ``sys`` to normalised trajectories by free-run output error.
 
     Parameters
@@ -274,24 +282,31 @@ def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: 
     max_radius : float
         Spectral radius that no accepted ``A`` may reach.
     max_evaluations : int
-        Residual evaluations allowed to ``least_squares``.
+        Cost evaluations allowed (a free run for ``quasi-newton``, ``J^T J`` for ``gauss-newton``).
+    method : {"quasi-newton", "gauss-newton"}
+        The minimiser (module docstring).
     report : callable, optional
         ``report(evaluations, cost, best_cost)`` after every evaluation (progress display).
     """
     if not sys.spectral_radius < max_radius:
         raise ConfigError(f"refinement must start from a stable system, got spectral radius {sys.spectral_radius:.6g} "
                           f">= max_radius {max_radius}; pull the eigenvalues in first (nnfmu.linear.stabilise)")
-    if x0 not in X0_OPTIONS:
-        raise ConfigError(f"x0 must be one of {', '.join(X0_OPTIONS)}, got {x0!r}")
+    for name, value, allowed in (("x0", x0, X0_OPTIONS), ("method", method, METHODS)):
+        if value not in allowed:
+            raise ConfigError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
     problem = _Problem(sys, us, ys, init, x0, max_radius, report)
     if problem.n_dir == 0:
         return RefineResult(sys, problem.cost0, problem.cost0, 0, "nothing to refine")
-    result = scipy.optimize.least_squares(problem.residuals, np.zeros(problem.n_dir), jac=problem.jacobian,
-                                          method="trf", x_scale="jac", max_nfev=max_evaluations)
-    refined = problem.system(result.x)
-    if not refined.spectral_radius < max_radius or result.cost > problem.cost0:
-        return RefineResult(sys, problem.cost0, problem.cost0, int(result.nfev), f"rejected ({result.message})")
-    message = result.message
+    if method == "quasi-newton":
+        found = minimise_output_error(problem, max_evaluations)
+        beta, cost, evaluations, message = found.x, found.cost, found.evaluations, found.message
+    else:
+        result = scipy.optimize.least_squares(problem.residuals, np.zeros(problem.n_dir), jac=problem.jacobian,
+                                              method="trf", x_scale="jac", max_nfev=max_evaluations)
+        beta, cost, evaluations, message = result.x, float(result.cost), int(result.nfev), result.message
+    refined = problem.system(beta)
+    if not refined.spectral_radius < max_radius or cost > problem.cost0:
+        return RefineResult(sys, problem.cost0, problem.cost0, evaluations, f"rejected ({message})")
     if refined.spectral_radius > max_radius - 1e-4 * max_radius:
         message += " Stopped at the spectral-radius limit: the fit pulls towards an unstable model."
-    return RefineResult(refined, problem.cost0, float(result.cost), int(result.nfev), message)
+    return RefineResult(refined, problem.cost0, cost, evaluations, message)

@@ -97,15 +97,24 @@ def free_run(sys: StateSpace, x0s: np.ndarray, us: np.ndarray) -> tuple[np.ndarr
     """Simulate a batch: ``x0s`` (batch, n), ``us`` (batch, N, n_u) -> states and outputs.
 
     Returns ``xs`` (batch, N, n) with ``xs[:, 0] = x0s`` and ``ys = xs @ C.T + d``
-    (batch, N, n_y). ``us[:, N-1]`` is not used.
+    (batch, N, n_y). ``us[:, N-1]`` is not used. ``xs`` is a view of a time-major array: the
+    loop over time then works on contiguous (batch, n) rows (several times faster than strided ones).
     """
-    batch, n_steps, _ = us.shape
-    xs = np.empty((batch, n_steps, sys.n_x))
-    xs[:, 0] = x0s
-    forced = us @ sys.B.T + sys.b  # (batch, N, n)
-    for k in range(n_steps - 1):
-        xs[:, k + 1] = xs[:, k] @ sys.A.T + forced[:, k]
+    xs = free_run_time_major(sys, x0s, us).transpose(1, 0, 2)
     return xs, xs @ sys.C.T + sys.d
+
+
+def free_run_time_major(sys: StateSpace, x0s: np.ndarray, us: np.ndarray) -> np.ndarray:
+    """States (N, batch, n) of the free run from ``x0s`` (batch, n) under ``us`` (batch, N, n_u)."""
+    batch, n_steps, _ = us.shape
+    forced = np.ascontiguousarray((us @ sys.B.T + sys.b).transpose(1, 0, 2))  # (N, batch, n)
+    xs = np.empty((n_steps, batch, sys.n_x))
+    xs[0] = x0s
+    A_t = np.ascontiguousarray(sys.A.T)
+    for k in range(n_steps - 1):
+        np.matmul(xs[k], A_t, out=xs[k + 1])
+        xs[k + 1] += forced[k]
+    return xs
 
 
 def padded(arrays, n_steps: int | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,7 @@ import torch
 from nnfmu.data import Trajectories
 from nnfmu.errors import DataError
 from nnfmu.models.base import StepModel
+from nnfmu.training.gather import gathered_batches
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,11 @@ def _pad(seqs: list) -> Batch:
 def epoch_batches(seqs: list, *, batch_size: int, truncate: int | None,
                   generator: torch.Generator) -> Iterator[Batch]:
     """Shuffled batches of one epoch, drawn with ``generator``."""
+    gathered = gathered_batches(seqs, batch_size=batch_size, truncate=truncate, generator=generator)
+    if gathered is not None:  # equal lengths: the same batches, one gather each (nnfmu.training.gather)
+        for un, yn in gathered:
+            yield Batch(un, yn, None)
+        return
     items = seqs if truncate is None else _windows(seqs, truncate, generator)
     if not items:
         longest = max(len(un) for un, _ in seqs)

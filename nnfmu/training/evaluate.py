@@ -10,6 +10,7 @@ import torch
 from nnfmu.data import Trajectories
 from nnfmu.metrics import NrmseResult, nrmse
 from nnfmu.models.base import StepModel, torch_threads
+from nnfmu.training.compiled_rollout import free_run_forward
 from nnfmu.training.resources import check_threads
 
 _EVAL_BATCH = 1024
@@ -40,7 +41,7 @@ def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False,
                     chunk = index[start:start + _EVAL_BATCH]
                     u = torch.as_tensor(np.stack([traj.u[i] for i in chunk]), dtype=dtype, device=device)
                     y0 = torch.as_tensor(np.stack([traj.y[i][0] for i in chunk]), dtype=dtype, device=device)
-                    y = runner(u, y0).double().cpu().numpy()
+                    y = free_run_forward(runner, u, y0).double().cpu().numpy()
                     for j, i in enumerate(chunk):
                         preds[i] = y[j]
     finally:

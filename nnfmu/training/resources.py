@@ -75,6 +75,20 @@ def check_threads(threads: int | None) -> int:
     return threads
 
 
+def adamw(params, *, lr: float, weight_decay: float) -> torch.optim.AdamW:
+    """AdamW with torch's fused kernel where it has one for these tensors, the default implementation otherwise.
+
+    The fused kernel updates every parameter in one call instead of about ten operations per
+    parameter tensor: for the small networks here it cut the optimiser's time per batch from
+    540 to 160 microseconds (docs/scaling.md). Same update, rounding aside.
+    """
+    params = list(params)
+    try:
+        return torch.optim.AdamW(params, lr=lr, weight_decay=weight_decay, fused=True)
+    except (RuntimeError, TypeError, ValueError):  # an older torch, or a device or dtype without the kernel
+        return torch.optim.AdamW(params, lr=lr, weight_decay=weight_decay)
+
+
 def cpu_state(state: dict) -> dict:
     """A state dict (nested dicts and lists too) with every tensor on the CPU: device-independent checkpoints."""
     if isinstance(state, torch.Tensor):

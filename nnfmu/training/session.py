@@ -20,9 +20,10 @@ from nnfmu.errors import TrainingError
 from nnfmu.models.base import StepModel
 from nnfmu.models.checkpoint import save_checkpoint, state_snapshot
 from nnfmu.training.batches import epoch_batches, masked_mse
+from nnfmu.training.compiled_rollout import training_rollout
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
-from nnfmu.training.resources import cpu_state
+from nnfmu.training.resources import adamw, cpu_state
 
 
 @contextlib.contextmanager
@@ -78,7 +79,7 @@ class Session:
 
     def __init__(self, model: StepModel, cfg: TrainConfig, train_seqs: list, valid, out: Path | None):
         self.model, self.cfg, self.train_seqs, self.valid, self.out = model, cfg, train_seqs, valid, out
-        self.optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        self.optimizer = adamw(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.epoch = 0
         self.history: list[dict] = []
         self.best_state = state_snapshot(model)
@@ -95,10 +96,10 @@ class Session:
         generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + self.epoch + 1)
         total, count, early = 0.0, 0, False
         model.train()
+        rollout = training_rollout(model, cfg.strategy)
         for b, batch in enumerate(epoch_batches(self.train_seqs, batch_size=cfg.batch_size,
                                                 truncate=cfg.truncate, generator=generator)):
-            feed = None if cfg.strategy == "parallel" else batch.yn
-            loss = masked_mse(model.rollout_normalised(batch.un, batch.yn[:, 0], feed), batch.yn, batch.mask)
+            loss = masked_mse(rollout(batch.un, batch.yn), batch.yn, batch.mask)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)

@@ -1,0 +1,217 @@
+"""The free run of the recurrent networks (RNN, LSTM, GRU) as compiled C, forward and backward.
+
+Parallel training back-propagates through hundreds of steps of a small network. In
+torch each step is 15-20 small operations and as many autograd nodes; at the batch
+sizes used here their fixed cost of a few microseconds each, not arithmetic, bounds
+the throughput (docs/scaling.md has the measurements). ``rollout.c`` runs the whole
+free run in one call and back-propagation through time in another, with the same
+operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`::
+
+    rollout = compiled_rollout(model)        # None where the C path does not apply
+    ys = rollout(un, yn0)                    # (B, T, n_u), (B, n_y) -> (B, T, n_y), as model.rollout_normalised
+    loss(ys).backward()                      # gradients of every weight (and of yn0)
+
+It applies to a :class:`RecurrentStepModel` on the CPU in float32 or float64, with no
+active dropout (eval mode, or ``dropout=0``). The library is compiled at first use with
+the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
+like the compiled physics (``$NNFMU_CACHE_DIR``). Without a compiler, or if compiling
+fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
+(slower, same numbers). ``NNFMU_COMPILED_ROLLOUT=0`` turns the C path off.
+Values and gradients equal torch's to rounding (tested in float64 to 1e-12).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import os
+import platform
+import tempfile
+import warnings
+from pathlib import Path
+
+import torch
+
+from nnfmu.errors import FmuBuildError, SimulationError
+from nnfmu.models.base import StepModel
+from nnfmu.models.recurrent import RecurrentStepModel
+
+_SOURCE = Path(__file__).with_name("rollout.c")
+_FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
+_CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}
+_REALS = {torch.float32: "float", torch.float64: "double"}
+ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
+
+
+def compiled_rollout(model: StepModel):
+    """``rollout(un, yn0) -> ys`` by the compiled free run, or None where it does not apply.
+
+    Applies to a :class:`RecurrentStepModel` whose weights are CPU float32/float64 tensors
+    and whose dropout is inactive (eval mode or ``dropout=0``); None otherwise, and None with a
+    one-time RuntimeWarning when the library cannot be compiled.
+    """
+    if not _applies(model):
+        return None
+    library = _library_or_none(model.u_mean.dtype)
+    if library is None:
+        return None
+    return functools.partial(_apply, model, library)
+
+
+def training_rollout(model: StepModel, strategy: str):
+    """``rollout(un, yn) -> predictions (B, T, n_y)`` for one training batch, as the trainer's loss sees them.
+
+    Parallel: the compiled free run where it applies (:func:`compiled_rollout`), else
+    ``model.rollout_normalised(un, yn[:, 0])``. Series-parallel: teacher forcing (torch's fused layers).
+    Call it after ``model.train()``: whether dropout is active decides the path.
+    """
+    if strategy != "parallel":
+        return lambda un, yn: model.rollout_normalised(un, yn[:, 0], yn)
+    fast = compiled_rollout(model)
+    if fast is None:
+        return lambda un, yn: model.rollout_normalised(un, yn[:, 0])
+    return lambda un, yn: fast(un, yn[:, 0])
+
+
+def free_run_forward(model: StepModel, u: torch.Tensor, y0: torch.Tensor) -> torch.Tensor:
+    """``model(u, y0)``: the free run in physical units, (B, T, n_u), (B, n_y) -> (B, T, n_y); compiled where it can."""
+    fast = compiled_rollout(model)
+    if fast is None:
+        return model(u, y0)
+    yn = fast(model.normalise_u(u), model.normalise_y(y0))
+    return torch.cat([y0[:, None], model.denormalise_y(yn[:, 1:])], dim=1)
+
+
+def _applies(model: StepModel) -> bool:
+    if os.environ.get(ENV_SWITCH, "1") == "0" or type(model) is not RecurrentStepModel:
+        return False
+    dtype = model.readout.weight.dtype
+    if dtype not in _REALS or any(p.device.type != "cpu" or p.dtype != dtype for p in model.parameters()):
+        return False
+    return not (model.training and model.config.dropout > 0)
+
+
+def _cell(model: RecurrentStepModel) -> int:
+    arch = model.config.arch
+    return _CELLS[f"rnn_{model.config.activation}" if arch == "rnn" else arch]
+
+
+def _weights(model: RecurrentStepModel) -> list[torch.Tensor]:
+    out = []
+    for m in model.rnn_layers:
+        out += [m.weight_ih_l0, m.weight_hh_l0, m.bias_ih_l0, m.bias_hh_l0]
+    return out + [model.readout.weight, model.readout.bias]
+
+
+def _apply(model: RecurrentStepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+    return _Rollout.apply(model, library, un, yn0, *_weights(model))
+
+
+def _pointers(tensors) -> ctypes.Array:
+    return (ctypes.c_void_p * len(tensors))(*(t.data_ptr() for t in tensors))
+
+
+def _header(model: RecurrentStepModel, B: int, T: int) -> tuple:
+    c = model.config
+    return (_cell(model), B, T, c.n_u, c.n_y, c.hidden, c.layers, int(c.skip), float(c.skip_scale))
+
+
+class _Rollout(torch.autograd.Function):
+    """Forward: ``nnfmu_rollout_forward``. Backward: ``nnfmu_rollout_backward``. Time-major inside."""
+
+    @staticmethod
+    def forward(ctx, model, library, un, yn0, *weights):
+        B, T, _ = un.shape
+        c, dtype = model.config, weights[0].dtype
+        un_t = un.detach().to(dtype).transpose(0, 1).contiguous()
+        yn0 = yn0.detach().to(dtype).contiguous()
+        ys_t = un_t.new_empty(T, B, c.n_y)
+        keep = any(ctx.needs_input_grad[2:])
+        shape = (T, c.layers, B, c.hidden)
+        hs = un_t.new_empty(shape) if keep else None
+        cs = un_t.new_empty(shape) if keep and c.arch == "lstm" else None
+        width = library.nnfmu_rollout_saved_width(_cell(model), c.hidden)
+        saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
+        status = library.nnfmu_rollout_forward(*_header(model, B, T), _pointers(weights), _ptr(un_t), _ptr(yn0),
+                                               _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved))
+        _check(status, "free run", B, T)
+        if keep:
+            ctx.model, ctx.library = model, library
+            ctx.save_for_backward(un_t, ys_t, hs, cs, saved, *weights)
+        return ys_t.transpose(0, 1).to(un.dtype)
+
+    @staticmethod
+    def backward(ctx, gys):
+        un_t, ys_t, hs, cs, saved, *weights = ctx.saved_tensors
+        T, B, _ = un_t.shape
+        grads = [torch.zeros_like(w) for w in weights]
+        gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
+        gyn0 = gys_t.new_empty(gys_t.shape[1:])
+        status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), _pointers(weights), _ptr(un_t),
+                                                    _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved), _ptr(gys_t),
+                                                    _pointers(grads), _ptr(gyn0))
+        _check(status, "back-propagation through the free run", B, T)
+        needed = ctx.needs_input_grad
+        return (None, None, None, gyn0 if needed[3] else None,
+                *(g if need else None for g, need in zip(grads, needed[4:])))
+
+
+def _ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
+    return ctypes.c_void_p(None if t is None else t.data_ptr())
+
+
+def _check(status: int, what: str, B: int, T: int) -> None:
+    if status != 0:
+        raise SimulationError(f"the compiled {what} ran out of memory at batch {B} x {T} steps; "
+                              "use a smaller batch_size or truncate the trajectories")
+
+
+# ---- the library -------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=None)
+def _library_or_none(dtype: torch.dtype) -> ctypes.CDLL | None:
+    try:
+        return _library(dtype)
+    except (FmuBuildError, OSError) as exc:
+        warnings.warn(f"the recurrent free run runs in torch instead of compiled C (slower, same values): "
+                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=3)
+        return None
+
+
+def _library(dtype: torch.dtype) -> ctypes.CDLL:
+    """Compile ``rollout.c`` for ``dtype`` once per machine (cached by source, flags and CPU) and load it."""
+    from nnfmu.export.compiler import find_compiler, run_compiler, shared_library_suffix
+    from nnfmu.physics.compiled import cache_dir
+
+    source, cc = _SOURCE.read_text(), find_compiler()
+    flags = (*_FLAGS, f"-DNNFMU_REAL={_REALS[dtype]}")
+    key = hashlib.sha256("\n".join([source, cc, " ".join(flags), platform.machine(), _cpu_id()]).encode())
+    target = cache_dir() / f"rollout_{_REALS[dtype]}_{key.hexdigest()[:20]}{shared_library_suffix()}"
+    if not target.exists():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix="nnfmu_rollout_", dir=target.parent) as tmp:
+            c_file, built = Path(tmp) / "rollout.c", Path(tmp) / target.name
+            c_file.write_text(source)
+            what = "compiling the recurrent free run (nnfmu/training/rollout.c)"
+            try:
+                run_compiler([*flags, str(c_file), "-o", str(built), "-lmvec", "-lm"], what=what)
+            except FmuBuildError:  # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
+                run_compiler([*flags, str(c_file), "-o", str(built), "-lm"], what=what)
+            os.replace(built, target)  # atomic: a parallel run never loads a half-written library
+    lib = ctypes.CDLL(str(target))
+    lib.nnfmu_rollout_forward.argtypes = [ctypes.c_int] * 8 + [ctypes.c_double] + [ctypes.c_void_p] * 7
+    lib.nnfmu_rollout_backward.argtypes = [ctypes.c_int] * 8 + [ctypes.c_double] + [ctypes.c_void_p] * 9
+    lib.nnfmu_rollout_saved_width.argtypes = [ctypes.c_int, ctypes.c_int]
+    for entry in (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width):
+        entry.restype = ctypes.c_int
+    return lib
+
+
+def _cpu_id() -> str:
+    """What ``-march=native`` depends on: the CPU model and flags (a shared cache may serve other machines)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.processor()
+    lines = [line for line in text.splitlines() if line.startswith(("model name", "flags"))]
+    return "\n".join(sorted(set(lines)))

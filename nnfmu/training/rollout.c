@@ -1,0 +1,390 @@
+/* Free run of a recurrent step network with output feedback, forward and back-propagation through time.
+ *
+ * nnfmu/training/compiled_rollout.py compiles this file once per machine (REAL = float and double) and
+ * calls it from torch. It computes exactly what RecurrentStepModel._free_run_norm computes with
+ * torch.rnn_tanh_cell / rnn_relu_cell / lstm_cell / gru_cell, a linear readout and the optional skip
+ * connection, for L stacked layers, without dropout:
+ *
+ *     x_k = [y_k, u_k];  h^l_{k+1} = cell_l(input^l, h^l_k);  input^0 = x_k, input^l = h^{l-1}_{k+1}
+ *     y_{k+1} = y_k + skip_scale * (W_o h^{L-1}_{k+1} + b_o)   (skip)   or   W_o h^{L-1}_{k+1} + b_o
+ *
+ * Why C: torch runs each step as 15-20 small operations (and as many autograd nodes), whose fixed
+ * cost of a few microseconds each, not arithmetic, bounds training throughput at the batch sizes
+ * used here. One call runs the whole rollout, one call its whole backward pass.
+ *
+ * Layout: time-major. un (T, B, n_u), yn0 (B, n_y), ys (T, B, n_y) with ys[0] = yn0.
+ * Parameters, in torch's layout, per layer: W_ih (G H, n_in), W_hh (G H, H), b_ih (G H), b_hh (G H);
+ * then W_o (n_y, H), b_o (n_y). G = 1 (RNN), 4 (LSTM: i, f, g, o), 3 (GRU: r, z, n).
+ * For the backward pass the forward pass stores h (and c for the LSTM) of every layer and step,
+ * (T, L, B, H), and the activated gates, (T - 1, L, B, S) with S = saved_width(): what torch's autograd
+ * keeps too, in less memory.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef NNFMU_REAL
+#define NNFMU_REAL double
+#endif
+typedef NNFMU_REAL real;
+
+/* Vector variants from glibc's libmvec where available (the loops below call them on whole rows). */
+#if defined(__GLIBC__) && defined(__x86_64__)
+#define NNFMU_SIMD __attribute__((simd("notinbranch")))
+#else
+#define NNFMU_SIMD
+#endif
+NNFMU_SIMD double exp(double);
+NNFMU_SIMD double tanh(double);
+NNFMU_SIMD float expf(float);
+NNFMU_SIMD float tanhf(float);
+#define EXP(v) (sizeof(real) == sizeof(float) ? (real)expf((float)(v)) : (real)exp((double)(v)))
+#define TANH(v) (sizeof(real) == sizeof(float) ? (real)tanhf((float)(v)) : (real)tanh((double)(v)))
+
+enum { RNN_TANH = 0, RNN_RELU = 1, LSTM = 2, GRU = 3 };
+
+typedef struct {
+  int cell, B, T, n_u, n_y, H, L, G, has_skip;
+  real skip;
+} shape_t;
+
+typedef struct {                 /* one layer's weights, transposed so that inner loops run over G H */
+  int n_in;
+  const real *W_ih, *W_hh;       /* torch's layout: (G H, n_in), (G H, H) */
+  real *Wt_ih, *Wt_hh;           /* (n_in, G H), (H, G H) */
+  const real *b_ih, *b_hh;       /* (G H) */
+  real *gWt_ih, *gWt_hh;         /* their gradients, same layout (backward only) */
+} layer_t;
+
+static int gates(int cell) { return cell == LSTM ? 4 : cell == GRU ? 3 : 1; }
+
+/* Values per sample, layer and step that the backward pass needs: the activated gates (GRU: r, z, n and
+ * W_hn h + b_hn). */
+int nnfmu_rollout_saved_width(int cell, int H) { return cell == GRU ? 4 * H : gates(cell) * H; }
+
+static void transpose(int rows, int cols, const real *a, real *at) {
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) at[(long)c * rows + r] = a[(long)r * cols + c];
+}
+
+static void free_layers(layer_t *layers, int L) {
+  if (!layers) return;
+  for (int l = 0; l < L; ++l) {
+    free(layers[l].Wt_ih); free(layers[l].Wt_hh); free(layers[l].gWt_ih); free(layers[l].gWt_hh);
+  }
+  free(layers);
+}
+
+static layer_t *make_layers(const shape_t *s, const real **params, int with_grads) {
+  layer_t *layers = calloc((size_t)s->L, sizeof(layer_t));
+  if (!layers) return NULL;
+  const int GH = s->G * s->H;
+  for (int l = 0; l < s->L; ++l) {
+    layer_t *ly = layers + l;
+    ly->n_in = l ? s->H : s->n_y + s->n_u;
+    ly->Wt_ih = malloc(sizeof(real) * GH * ly->n_in);
+    ly->Wt_hh = malloc(sizeof(real) * GH * s->H);
+    ly->W_ih = params[4 * l];
+    ly->W_hh = params[4 * l + 1];
+    ly->b_ih = params[4 * l + 2];
+    ly->b_hh = params[4 * l + 3];
+    if (with_grads) {
+      ly->gWt_ih = calloc((size_t)GH * ly->n_in, sizeof(real));
+      ly->gWt_hh = calloc((size_t)GH * s->H, sizeof(real));
+    }
+    if (!ly->Wt_ih || !ly->Wt_hh || (with_grads && (!ly->gWt_ih || !ly->gWt_hh))) {
+      free_layers(layers, s->L);
+      return NULL;
+    }
+    transpose(GH, ly->n_in, params[4 * l], ly->Wt_ih);
+    transpose(GH, s->H, params[4 * l + 1], ly->Wt_hh);
+  }
+  return layers;
+}
+
+/* Vectors of 32 bytes (8 floats or 4 doubles; GCC/Clang vector extensions), two of them per block of
+ * outputs that the matrix kernels keep in registers across a whole sum. */
+typedef real vec_t __attribute__((vector_size(32)));
+#define VL ((int)(sizeof(vec_t) / sizeof(real)))
+#define BLOCK (2 * VL)
+
+static inline vec_t load(const real *p) {
+  vec_t v;
+  memcpy(&v, p, sizeof v);
+  return v;
+}
+
+static inline void store(real *p, vec_t v) { memcpy(p, &v, sizeof v); }
+
+static inline real dot(int n, const real *restrict a, const real *restrict b) {
+  real acc = 0;
+#pragma omp simd reduction(+ : acc)
+  for (int i = 0; i < n; ++i) acc += a[i] * b[i];
+  return acc;
+}
+
+/* out[j] (+)= b[j] + sum_i x[i] M[i, j] for M (n, m) row-major; b may be NULL, add: accumulate into out.
+ * Blocks of BLOCK outputs stay in registers over the whole sum (no load and store of out per term);
+ * Mt = M^T (m, n), used for the outputs left over as dot products, may be NULL when BLOCK divides m. */
+static inline void vecmat(int n, int m, const real *restrict x, const real *restrict M, const real *restrict Mt,
+                          const real *restrict b, int add, real *restrict out) {
+  int j0 = 0;
+  for (; j0 + 4 * VL <= m; j0 += 4 * VL) {
+    vec_t a0 = add ? load(out + j0) : (vec_t){0}, a1 = add ? load(out + j0 + VL) : (vec_t){0};
+    vec_t a2 = add ? load(out + j0 + 2 * VL) : (vec_t){0}, a3 = add ? load(out + j0 + 3 * VL) : (vec_t){0};
+    if (b) {
+      a0 += load(b + j0); a1 += load(b + j0 + VL); a2 += load(b + j0 + 2 * VL); a3 += load(b + j0 + 3 * VL);
+    }
+    for (int i = 0; i < n; ++i) {
+      const real *row = M + (long)i * m + j0;
+      a0 += x[i] * load(row); a1 += x[i] * load(row + VL); a2 += x[i] * load(row + 2 * VL); a3 += x[i] * load(row + 3 * VL);
+    }
+    store(out + j0, a0); store(out + j0 + VL, a1); store(out + j0 + 2 * VL, a2); store(out + j0 + 3 * VL, a3);
+  }
+  for (; j0 + BLOCK <= m; j0 += BLOCK) {
+    vec_t a0 = add ? load(out + j0) : (vec_t){0}, a1 = add ? load(out + j0 + VL) : (vec_t){0};
+    if (b) {
+      a0 += load(b + j0);
+      a1 += load(b + j0 + VL);
+    }
+    for (int i = 0; i < n; ++i) {
+      const real *row = M + (long)i * m + j0;
+      a0 += x[i] * load(row);
+      a1 += x[i] * load(row + VL);
+    }
+    store(out + j0, a0);
+    store(out + j0 + VL, a1);
+  }
+  for (int j = j0; j < m; ++j) {
+    const real acc = Mt ? dot(n, x, Mt + (long)j * n) : 0;
+    out[j] = (add ? out[j] : 0) + (b ? b[j] : 0) + acc;
+  }
+}
+
+static inline real sigmoid(real v) { return (real)1 / ((real)1 + EXP(-v)); }
+
+/* One cell on one sample. gi, gh (G H) receive the activated gates (GRU: r, z, n in gi, W_hn h + b_hn in
+ * gh[2H..]), h_new and c_new the new state. */
+static void cell_forward(const shape_t *s, const layer_t *ly, const real *x, const real *h, const real *c,
+                         real *restrict gi, real *restrict gh, real *h_new, real *c_new) {
+  const int H = s->H, GH = s->G * H;
+  vecmat(ly->n_in, GH, x, ly->Wt_ih, ly->W_ih, ly->b_ih, 0, gi);
+  vecmat(H, GH, h, ly->Wt_hh, ly->W_hh, ly->b_hh, 0, gh);
+  if (s->cell == GRU) {
+    for (int j = 0; j < 2 * H; ++j) gi[j] = sigmoid(gi[j] + gh[j]);
+    for (int j = 0; j < H; ++j) gi[2 * H + j] = TANH(gi[2 * H + j] + gi[j] * gh[2 * H + j]);
+    for (int j = 0; j < H; ++j) h_new[j] = gi[2 * H + j] + gi[H + j] * (h[j] - gi[2 * H + j]);
+  } else if (s->cell == LSTM) {
+    for (int j = 0; j < GH; ++j) gi[j] += gh[j];
+    for (int j = 0; j < 2 * H; ++j) gi[j] = sigmoid(gi[j]);
+    for (int j = 2 * H; j < 3 * H; ++j) gi[j] = TANH(gi[j]);
+    for (int j = 3 * H; j < 4 * H; ++j) gi[j] = sigmoid(gi[j]);
+    for (int j = 0; j < H; ++j) {
+      c_new[j] = gi[H + j] * c[j] + gi[j] * gi[2 * H + j];
+      h_new[j] = gi[3 * H + j] * TANH(c_new[j]);
+    }
+  } else {
+    for (int j = 0; j < H; ++j) {
+      const real v = gi[j] + gh[j];
+      gi[j] = s->cell == RNN_TANH ? TANH(v) : (v > 0 ? v : 0);
+    }
+    memcpy(h_new, gi, sizeof(real) * H);
+  }
+}
+
+/* Gradients of the gate pre-activations (dgi for W_ih and b_ih, dgh for W_hh and b_hh) from dh (and dc)
+ * of the cell's outputs, given the saved gates; adds the gradient reaching h (and c) of the previous step
+ * to dh_prev (dc_prev). */
+static void cell_backward(const shape_t *s, const real *gi, const real *h, const real *c,
+                          const real *c_new, const real *dh, const real *dc, real *dgi, real *dgh,
+                          real *dh_prev, real *dc_prev) {
+  const int H = s->H, GH = s->G * H;
+  if (s->cell == GRU) {
+    for (int j = 0; j < H; ++j) {
+      const real r = gi[j], z = gi[H + j], n = gi[2 * H + j];
+      const real dn = dh[j] * ((real)1 - z) * ((real)1 - n * n);
+      const real dr = dn * gi[3 * H + j] * r * ((real)1 - r);
+      const real dz = dh[j] * (h[j] - n) * z * ((real)1 - z);
+      dgi[j] = dgh[j] = dr;
+      dgi[H + j] = dgh[H + j] = dz;
+      dgi[2 * H + j] = dn;
+      dgh[2 * H + j] = dn * r;
+      dh_prev[j] += dh[j] * z;
+    }
+    return;
+  }
+  if (s->cell == LSTM) {
+    for (int j = 0; j < H; ++j) {
+      const real i = gi[j], f = gi[H + j], g = gi[2 * H + j], o = gi[3 * H + j], tc = TANH(c_new[j]);
+      const real dcj = dc[j] + dh[j] * o * ((real)1 - tc * tc);
+      dgi[j] = dcj * g * i * ((real)1 - i);
+      dgi[H + j] = dcj * c[j] * f * ((real)1 - f);
+      dgi[2 * H + j] = dcj * i * ((real)1 - g * g);
+      dgi[3 * H + j] = dh[j] * tc * o * ((real)1 - o);
+      dc_prev[j] = dcj * f;
+    }
+  } else {
+    for (int j = 0; j < H; ++j)
+      dgi[j] = s->cell == RNN_TANH ? dh[j] * ((real)1 - gi[j] * gi[j]) : (gi[j] > 0 ? dh[j] : 0);
+  }
+  memcpy(dgh, dgi, sizeof(real) * GH);
+}
+
+static void readout(const shape_t *s, const real *Wo, const real *bo, const real *h, const real *y, real *y_next) {
+  for (int o = 0; o < s->n_y; ++o) {
+    const real acc = bo[o] + dot(s->H, Wo + (long)o * s->H, h);
+    y_next[o] = s->has_skip ? y[o] + s->skip * acc : acc;
+  }
+}
+
+static shape_t make_shape(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip) {
+  shape_t s = {cell, B, T, n_u, n_y, H, L, gates(cell), has_skip, (real)skip};
+  return s;
+}
+
+/* The free run. hs, cs (T, L, B, H) and saved (T - 1, L, B, S) receive what the backward pass needs; with
+ * hs == NULL only two steps are kept (inference). cs is used by the LSTM only. Returns 0, or -1 when
+ * memory runs out. */
+int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
+                          const real **params, const real *un, const real *yn0, real *ys, real *hs, real *cs,
+                          real *saved) {
+  const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
+  const long LBH = (long)L * B * H;
+  const int n0 = n_y + n_u, GH = s.G * H, S = nnfmu_rollout_saved_width(cell, H);
+  layer_t *layers = make_layers(&s, params, 0);
+  real *gi = malloc(sizeof(real) * GH), *gh = malloc(sizeof(real) * GH), *x = malloc(sizeof(real) * n0);
+  real *ring_h = hs ? NULL : calloc((size_t)2 * LBH, sizeof(real));
+  real *ring_c = (hs || cell != LSTM) ? NULL : calloc((size_t)2 * LBH, sizeof(real));
+  const int ok = layers && gi && gh && x && (hs || ring_h) && (hs || cell != LSTM || ring_c);
+  if (ok) {
+    real *h_all = hs ? hs : ring_h, *c_all = hs ? cs : ring_c;
+    memset(h_all, 0, sizeof(real) * LBH);
+    if (cell == LSTM) memset(c_all, 0, sizeof(real) * LBH);
+    memcpy(ys, yn0, sizeof(real) * (size_t)B * n_y);
+    for (int k = 0; k + 1 < T; ++k) {
+      const long now = (hs ? (long)k : (long)(k & 1)) * LBH, next = (hs ? (long)k + 1 : (long)((k + 1) & 1)) * LBH;
+      for (int b = 0; b < B; ++b) {
+        const real *y = ys + ((long)k * B + b) * n_y;
+        memcpy(x, y, sizeof(real) * n_y);
+        memcpy(x + n_y, un + ((long)k * B + b) * n_u, sizeof(real) * n_u);
+        const real *in = x;
+        for (int l = 0; l < L; ++l) {
+          const long at = ((long)l * B + b) * H;
+          real *c_now = cell == LSTM ? c_all + now + at : NULL, *c_next = cell == LSTM ? c_all + next + at : NULL;
+          real *gates_out = saved ? saved + (((long)k * L + l) * B + b) * S : gi;
+          cell_forward(&s, layers + l, in, h_all + now + at, c_now, gates_out, gh, h_all + next + at, c_next);
+          if (saved && cell == GRU) memcpy(gates_out + 3 * H, gh + 2 * H, sizeof(real) * H);
+          in = h_all + next + at;
+        }
+        readout(&s, params[4 * L], params[4 * L + 1], in, y, ys + ((long)(k + 1) * B + b) * n_y);
+      }
+    }
+  }
+  free_layers(layers, L); free(gi); free(gh); free(x); free(ring_h); free(ring_c);
+  return ok ? 0 : -1;
+}
+
+/* acc (n, m) += sum_b a[b, :n]^T c[b, :m], rows of a and c strided by lda and ldc: the weight gradients
+ * of one step over the whole batch, with BLOCK entries of acc in registers across the batch. */
+static void outer_sum(int B, int n, int m, const real *restrict a, long lda, const real *restrict c, long ldc,
+                      real *restrict acc) {
+  for (int i = 0; i < n; ++i) {
+    real *out = acc + (long)i * m;
+    int j0 = 0;
+    for (; j0 + BLOCK <= m; j0 += BLOCK) {
+      vec_t s0 = load(out + j0), s1 = load(out + j0 + VL);
+      for (int b = 0; b < B; ++b) {
+        const real ai = a[b * lda + i], *row = c + b * ldc + j0;
+        s0 += ai * load(row);
+        s1 += ai * load(row + VL);
+      }
+      store(out + j0, s0);
+      store(out + j0 + VL, s1);
+    }
+    for (int j = j0; j < m; ++j) {
+      real sum = out[j];
+      for (int b = 0; b < B; ++b) sum += a[b * lda + i] * c[b * ldc + j];
+      out[j] = sum;
+    }
+  }
+}
+
+/* Back-propagation through the free run. gys (T, B, n_y): dL/dys. grads: same layout as params, added to
+ * (zero them first). gyn0 (B, n_y) receives dL/dyn0. un, ys, hs, cs, saved as left by the forward pass.
+ * Each step runs layer by layer over the whole batch, so that the weight gradients of a step are sums
+ * over the batch (outer_sum) instead of B separate updates. */
+int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
+                           const real **params, const real *un, const real *ys, const real *hs, const real *cs,
+                           const real *saved, const real *gys, real **grads, real *gyn0) {
+  const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
+  const long LBH = (long)L * B * H, BH = (long)B * H;
+  const int n0 = n_y + n_u, GH = s.G * H, n_max = n0 > H ? n0 : H, S = nnfmu_rollout_saved_width(cell, H);
+  const real *Wo = params[4 * L];
+  layer_t *layers = make_layers(&s, params, 1);
+  real *carry_y = calloc((size_t)B * n_y, sizeof(real));      /* dL/dy_{k+1} through the later steps */
+  real *carry_h = calloc((size_t)LBH, sizeof(real));          /* dL/dh^l_{k+1} through the later steps */
+  real *carry_c = calloc((size_t)LBH, sizeof(real));          /* dL/dc^l_{k+1} (LSTM) */
+  real *dgi = malloc(sizeof(real) * GH * B), *dgh = malloc(sizeof(real) * GH * B);   /* (B, G H) */
+  real *dh = malloc(sizeof(real) * BH), *din = malloc(sizeof(real) * n_max * B);      /* (B, H), (B, n_in) */
+  real *x = malloc(sizeof(real) * n0 * B), *go = malloc(sizeof(real) * n_y * B);
+  real *dc_next = calloc((size_t)H, sizeof(real));
+  const int ok = layers && carry_y && carry_h && carry_c && dgi && dgh && dh && din && x && go && dc_next;
+  for (int k = T - 2; ok && k >= 0; --k) {
+    const real *h_top = hs + (long)(k + 1) * LBH + (long)(L - 1) * BH;
+    for (int b = 0; b < B; ++b) {  /* the readout: y_{k+1} = [y_k +] skip * (W_o h + b_o) */
+      real *g = go + (long)b * n_y, *cy = carry_y + (long)b * n_y;
+      for (int o = 0; o < n_y; ++o) {
+        cy[o] += gys[((long)(k + 1) * B + b) * n_y + o];      /* now the whole dL/dy_{k+1} */
+        g[o] = has_skip ? s.skip * cy[o] : cy[o];
+        grads[4 * L + 1][o] += g[o];
+      }
+      memcpy(dh + (long)b * H, carry_h + (long)(L - 1) * BH + (long)b * H, sizeof(real) * H);
+      for (int o = 0; o < n_y; ++o)     /* dL/dh += W_o^T g */
+        for (int j = 0; j < H; ++j) dh[(long)b * H + j] += g[o] * Wo[(long)o * H + j];
+      memcpy(x + (long)b * n0, ys + ((long)k * B + b) * n_y, sizeof(real) * n_y);
+      memcpy(x + (long)b * n0 + n_y, un + ((long)k * B + b) * n_u, sizeof(real) * n_u);
+    }
+    outer_sum(B, n_y, H, go, n_y, h_top, H, grads[4 * L]);
+    for (int l = L - 1; l >= 0; --l) {
+      const layer_t *ly = layers + l;
+      const real *in = l ? hs + (long)(k + 1) * LBH + (long)(l - 1) * BH : x;
+      const long ld_in = l ? H : n0;
+      const real *h = hs + (long)k * LBH + (long)l * BH;
+      for (int b = 0; b < B; ++b) {
+        const long at = (long)l * BH + (long)b * H;
+        real *dh_prev = carry_h + at;     /* becomes dL/dh^l_k */
+        if (cell == LSTM) memcpy(dc_next, carry_c + at, sizeof(real) * H);
+        memset(dh_prev, 0, sizeof(real) * H);
+        cell_backward(&s, saved + (((long)k * L + l) * B + b) * S, h + (long)b * H,
+                      cell == LSTM ? cs + (long)k * LBH + at : NULL, cell == LSTM ? cs + (long)(k + 1) * LBH + at : NULL,
+                      dh + (long)b * H, dc_next, dgi + (long)b * GH, dgh + (long)b * GH, dh_prev, carry_c + at);
+        vecmat(GH, ly->n_in, dgi + (long)b * GH, ly->W_ih, ly->Wt_ih, NULL, 0, din + (long)b * n_max); /* W_ih^T dgi */
+        vecmat(GH, H, dgh + (long)b * GH, ly->W_hh, ly->Wt_hh, NULL, 1, dh_prev);                     /* W_hh^T dgh */
+        real *gb_ih = grads[4 * l + 2], *gb_hh = grads[4 * l + 3];
+        for (int j = 0; j < GH; ++j) { gb_ih[j] += dgi[(long)b * GH + j]; gb_hh[j] += dgh[(long)b * GH + j]; }
+      }
+      outer_sum(B, ly->n_in, GH, in, ld_in, dgi, GH, ly->gWt_ih);
+      outer_sum(B, H, GH, h, H, dgh, GH, ly->gWt_hh);
+      if (l)  /* the layer below: its output at k+1 feeds this layer now and itself at the next step */
+        for (int b = 0; b < B; ++b)
+          for (int j = 0; j < H; ++j) dh[(long)b * H + j] = din[(long)b * n_max + j] + carry_h[(long)(l - 1) * BH + (long)b * H + j];
+    }
+    for (int b = 0; b < B; ++b)
+      for (int o = 0; o < n_y; ++o)
+        carry_y[(long)b * n_y + o] = din[(long)b * n_max + o] + (has_skip ? carry_y[(long)b * n_y + o] : 0);
+  }
+  if (ok) {
+    for (long i = 0; i < (long)B * n_y; ++i) gyn0[i] = gys[i] + carry_y[i];
+    for (int l = 0; l < L; ++l) {
+      const layer_t *ly = layers + l;
+      real *g_ih = grads[4 * l], *g_hh = grads[4 * l + 1];
+      for (int j = 0; j < GH; ++j) {
+        for (int i = 0; i < ly->n_in; ++i) g_ih[(long)j * ly->n_in + i] += ly->gWt_ih[(long)i * GH + j];
+        for (int i = 0; i < H; ++i) g_hh[(long)j * H + i] += ly->gWt_hh[(long)i * GH + j];
+      }
+    }
+  }
+  free_layers(layers, L); free(carry_y); free(carry_h); free(carry_c); free(dgi); free(dgh);
+  free(dh); free(din); free(x); free(go); free(dc_next);
+  return ok ? 0 : -1;
+}
