@@ -26,8 +26,8 @@ import torch
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
+from nnfmu.export.init_window import init_function
 from nnfmu.models import MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
-from nnfmu.models.config import HYBRID_ARCH
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 
 _MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
@@ -47,7 +47,7 @@ def _recurrent_step(model: RecurrentStepModel, x, un):
     n_blocks = c.layers * (2 if model.is_lstm else 1)
     hidden = [x[c.n_y + i * c.hidden:c.n_y + (i + 1) * c.hidden] for i in range(n_blocks)]
     hs, cs = (hidden[:c.layers], hidden[c.layers:]) if model.is_lstm else (hidden, [None] * c.layers)
-    inp, new_h, new_c = ca.vertcat(yn, un), [], []
+    inp, new_h, new_c = ca.vertcat(ca.DM.zeros(c.n_y, 1) if c.increment else yn, un), [], []
     for i, layer in enumerate(model.rnn_layers):
         nets.check_recurrent_layer(layer, f"rnn_layers.{i}")
         h, cell = nets.recurrent_layer_expr(layer, inp, hs[i], cs[i])
@@ -75,7 +75,8 @@ def _window_step(model, x, un):
     L = c.window
     ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
     us = [x[L * c.n_y + j * c.n_u:L * c.n_y + (j + 1) * c.n_u] for j in range(L - 1)] + [un]
-    samples = [ca.vertcat(y, u) for y, u in zip(ys, us)]
+    seen = [y - ys[-1] for y in ys] if c.increment else ys  # increment mode: relative to the newest output
+    samples = [ca.vertcat(y, u) for y, u in zip(seen, us)]
     if isinstance(model, TCNStepModel):
         n = nets.linear_expr(model.head, _tcn_features(model, samples))
     else:
@@ -85,14 +86,9 @@ def _window_step(model, x, un):
 
 
 def _skip(model: StepModel, yn, n):
-    return yn + model.config.skip_scale * n if model.config.skip else n
-
-
-def _init_expr(model: StepModel, yn0, un0):
-    c = model.config
-    if isinstance(model, RecurrentStepModel):
-        return ca.vertcat(yn0, ca.DM.zeros(model.n_x - c.n_y, 1))
-    return ca.vertcat(ca.repmat(yn0, c.window, 1), ca.repmat(un0, c.window - 1, 1))
+    if not model.config.skip:
+        return n
+    return yn + (nets.dm(model.increment_scale) * n if model.config.increment else model.config.skip_scale * n)
 
 
 def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca.Function]:
@@ -121,13 +117,11 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
                           f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
     _check_modules(model)
     c = model.config
-    y0, u0 = ca.MX.sym("y0", c.n_y), ca.MX.sym("u0", c.n_u)
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
     u_mean, u_std, y_mean, y_std = (nets.dm(b) for b in (model.u_mean, model.u_std, model.y_mean, model.y_std))
-    x0 = _init_expr(model, (y0 - y_mean) / y_std, (u0 - u_mean) / u_std)
+    init = init_function(model, u_mean, u_std, y_mean, y_std)
     builder = _recurrent_step if isinstance(model, RecurrentStepModel) else _window_step
     x_next, yn_next = builder(model, x, (u - u_mean) / u_std)
-    init = ca.Function("init", [y0, u0], [x0], ["y0", "u0"], ["x0"])
     step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     if verify:
         verify_export(model, init, step)
@@ -142,10 +136,15 @@ def verify_export(model: StepModel, init: ca.Function, step: ca.Function, seed: 
     y0 = ref.y_mean.numpy() + ref.y_std.numpy() * rng.standard_normal(c.n_y)
     u0 = ref.u_mean.numpy() + ref.u_std.numpy() * rng.standard_normal(c.n_u)
     x = rng.standard_normal(model.n_x)
+    past = [ref.y_mean.numpy() + ref.y_std.numpy() * rng.standard_normal((c.init_window - 1, c.n_y)),
+            ref.u_mean.numpy() + ref.u_std.numpy() * rng.standard_normal((c.init_window - 1, c.n_u))]
+    past_t = {"y_past": torch.from_numpy(past[0])[None], "u_past": torch.from_numpy(past[1])[None]} \
+        if c.init_window > 1 else {}
     with torch.no_grad():
-        x0_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(u0)[None])[0].numpy()
+        x0_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(u0)[None], **past_t)[0].numpy()
         xn_t, yn_t = (a[0].numpy() for a in ref.step(torch.from_numpy(x)[None], torch.from_numpy(u0)[None]))
-    pairs = {"x0": (np.asarray(init(y0, u0)).ravel(), x0_t)}
+    past_c = [p.ravel() for p in past] if c.init_window > 1 else []
+    pairs = {"x0": (np.asarray(init(y0, u0, *past_c)).ravel(), x0_t)}
     xn_c, yn_c = step(x, u0)
     pairs["x_next"], pairs["y_next"] = (np.asarray(xn_c).ravel(), xn_t), (np.asarray(yn_c).ravel(), yn_t)
     for what, (got, want) in pairs.items():
@@ -179,13 +178,14 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         outputs=tuple(Variable(**ch) for ch in channels),
         description=f"{model.config.arch.upper()} network exported by nnfmu",
         source=_provenance(model),
+        init_window=model.config.init_window,
     )
     return CasadiModel(init, step, spec)
 
 
 def _is_hybrid(model) -> bool:
     """A :class:`nnfmu.hybrid.HybridStepModel` (physics + correction): exported by :mod:`nnfmu.hybrid.export`."""
-    return isinstance(model, StepModel) and model.config.arch == HYBRID_ARCH
+    return isinstance(model, StepModel) and model.config.arch == "hybrid"
 
 
 def _identifier(name: str) -> str:
