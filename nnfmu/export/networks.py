@@ -27,7 +27,8 @@ import torch
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.export.init_window import init_function
-from nnfmu.models import MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
+from nnfmu.export.ensemble import ensemble_to_casadi
+from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 
 _MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
@@ -112,6 +113,11 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
         from nnfmu.hybrid.export import hybrid_to_casadi
 
         return hybrid_to_casadi(model, verify=verify)
+    if isinstance(model, EnsembleStepModel):
+        init, step = ensemble_to_casadi(model, lambda member: to_casadi(member, verify=False))
+        if verify:
+            verify_export(model, init, step)
+        return init, step
     if not isinstance(model, _MODEL_CLASSES):
         raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
                           f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")

@@ -72,6 +72,10 @@ class ModelConfig:
         (:mod:`nnfmu.models.encoder`); the MLP and TCN fill their own window with it.
     encoder_hidden : int
         Width of the two hidden layers of the learned encoder (``init_window > 1``, recurrent only).
+    members : int
+        1: one network. K > 1: an ensemble of K networks of this config (trained with different
+        seeds, :func:`nnfmu.training.train_seeds`) whose mean output is fed back to all of them as
+        the one prediction (:mod:`nnfmu.models.ensemble`).
     activation : str
         Nonlinearity of the MLP and TCN layers and of the RNN (RNN: 'tanh' or 'relu').
         The LSTM and GRU have their fixed gate nonlinearities.
@@ -91,11 +95,12 @@ class ModelConfig:
     increment: bool = False
     init_window: int = 1
     encoder_hidden: int = 64
+    members: int = 1
 
     def __post_init__(self) -> None:
         if self.arch not in ARCHS:
             raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
-        for name in ("n_u", "n_y", "hidden", "kernel_size", "init_window", "encoder_hidden"):
+        for name in ("n_u", "n_y", "hidden", "kernel_size", "init_window", "encoder_hidden", "members"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ShapeError(f"ModelConfig.{name} must be a positive integer, got {value!r}")

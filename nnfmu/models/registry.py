@@ -12,6 +12,7 @@ from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
+from nnfmu.models.ensemble import EnsembleStepModel
 from nnfmu.models.mlp import MLPStepModel
 from nnfmu.models.recurrent import RecurrentStepModel
 from nnfmu.models.tcn import TCNStepModel
@@ -37,7 +38,8 @@ def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm
         config = ModelConfig.from_dict(config)
     if not isinstance(config, ModelConfig):
         raise ShapeError(f"expected a ModelConfig or a dict, got {type(config).__name__}")
-    model = architectures.model_class(config.arch)(config, meta)
+    cls = EnsembleStepModel if config.members > 1 else architectures.model_class(config.arch)
+    model = cls(config, meta)
     if norm is not None:
         model.set_normalisation(norm)
     return model
