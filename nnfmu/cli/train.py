@@ -28,6 +28,9 @@ _MODEL_OPTIONS = (
     ("--layers", "layers", int, "hidden layers (MLP), stacked recurrent layers, or TCN layers (default per arch)"),
     ("--window", "window", int, "past samples seen by the MLP (default 4); the TCN's must equal its receptive field"),
     ("--dropout", "dropout", float, "dropout probability on hidden activations (default 0)"),
+    ("--init-window", "init_window", int,
+     "N: the initial state is estimated from the N measured samples up to t0 (RNN/LSTM/GRU: a learned encoder; "
+     "MLP/TCN: their own window); 1 = from y0 and u0 alone (default 1)"),
 )
 _TRAIN_OPTIONS = (
     ("--lr", "lr", float, "AdamW learning rate (default 3e-3)"),
@@ -39,7 +42,23 @@ _TRAIN_OPTIONS = (
     ("--truncate", "truncate", int, "train on windows of this many samples (multiple shooting; default: whole)"),
     ("--seed", "seed", int, "random seed (default 0)"),
     ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none)"),
+    ("--feedback-noise", "feedback_noise", float,
+     "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
+    ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
+    ("--lr-schedule", "lr_schedule", str, "learning-rate schedule: constant or cosine over --epochs (default: constant)"),
+    ("--valid-horizon", "valid_horizon", str,
+     "validation free runs: split (each trajectory), joined (end to end), auto (joined for contiguous pieces "
+     "when the test is longer; default: auto)"),
 )
+# Switches (store_true), model or training fields.
+_FLAG_OPTIONS = (
+    ("--increment", "increment", "predict the increment y[k+1]-y[k] scaled by the data's increments, inputs "
+                                 "relative to the newest output: for integrating plants"),
+    ("--join", "join", "join the training trajectories end to end before cutting --truncate windows (data cut "
+                       "from one continuous recording)"),
+)
+_CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
+            "valid_horizon": ("auto", "split", "joined")}
 
 
 # (option, HybridConfig field, type, help): only with --arch hybrid.
@@ -70,7 +89,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
     p.add_argument("--out", required=True, help="checkpoint file to write (.pt)")
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
-        p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
+        p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
+    for flag, dest, text in _FLAG_OPTIONS:
+        p.add_argument(flag, dest=dest, action="store_const", const=True, default=None, help=text)
+    seeds = p.add_argument_group("seeds (several trainings of the same network)")
+    seeds.add_argument("--seeds", type=int, metavar="K",
+                       help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
+    seeds.add_argument("--keep", choices=["ensemble", "best"], default="ensemble",
+                       help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU), "
+                            "or the best on validation (default ensemble)")
+    seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     hybrid = p.add_argument_group("hybrid models (--arch hybrid)")
     for flag, dest, typ, text in _HYBRID_OPTIONS:
         hybrid.add_argument(flag, dest=dest, type=typ, default=None, choices=_HYBRID_CHOICES.get(dest),
@@ -90,6 +118,8 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
     from nnfmu.training import TrainConfig
 
     changes = _given(args, _TRAIN_OPTIONS)
+    if args.join is not None:
+        changes["join"] = True
     if args.strategy is not None:
         changes["strategy"] = args.strategy
     if hybrid and changes.get("strategy", "parallel") != "parallel":
@@ -116,6 +146,8 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     from nnfmu.models import ModelConfig
 
     given = _given(args, _MODEL_OPTIONS)
+    if args.increment is not None:
+        given["increment"] = True
     arch = args.arch or (stored or {}).get("arch")
     hybrid_given = _given(args, _HYBRID_OPTIONS)
     if hybrid_given and arch != "hybrid":
@@ -175,6 +207,8 @@ def _run(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(1)
+    if args.seeds is not None:
+        return _run_seeds(args, ds, model_config, train_config, out)
     result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet)
     for note in result.notes:
         print(f"note: {note}")
@@ -186,6 +220,37 @@ def _run(args: argparse.Namespace) -> int:
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
-    per_output = ", ".join(f"{c.name} {v:.4f}" for c, v in zip(ds.outputs, result.test.output_mean))
-    print(f"test free-run NRMSE: {result.test.mean:.4f} ({per_output})")
+    _print_test(ds, result.test, result.test_window, model_config.init_window)
+    return 0
+
+
+def _print_test(ds, test, test_window, n: int) -> None:
+    per_output = ", ".join(f"{c.name} {v:.4f}" for c, v in zip(ds.outputs, test.output_mean))
+    print(f"test free-run NRMSE: {test.mean:.4f} ({per_output}), from the measured y0")
+    if test_window is not None:
+        print(f"test free-run NRMSE after the init window: {test_window.mean:.4f} (samples 0..{n - 1} seen, "
+              f"scored from sample {n})")
+
+
+def _run_seeds(args: argparse.Namespace, ds, model_config, train_config, out) -> int:
+    from nnfmu.training import train_seeds
+
+    if args.resume:
+        from nnfmu.errors import ConfigError
+
+        raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
+                          "drop --resume and run the same command again")
+    result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
+                         progress=not args.quiet and args.jobs == 1)
+    for note in result.notes:
+        print(f"note: {note}")
+    for r in result.seeds:
+        test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
+        print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
+    spread = result.spread()
+    print(f"kept the {args.keep} of {args.seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
+          f"checkpoint {out}")
+    if result.test is not None:
+        _print_test(ds, result.test, result.test_window, model_config.init_window)
+        print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
     return 0

@@ -48,12 +48,13 @@ from typing import Mapping
 
 from nnfmu.errors import ConfigError, check_options
 from nnfmu.models import ARCHS, ModelConfig
-from nnfmu.training import STRATEGIES, TrainConfig
+from nnfmu.training import KEEP, STRATEGIES, TrainConfig
 
 SYSTEMS = ("valve", "arm", "robot")
 STUDY_BUDGETS = ("smoke", "quick", "paper")
-_MODEL_FIELDS = ("hidden", "layers", "window", "kernel_size", "dropout")
-_TRAIN_FIELDS = ("lr", "weight_decay", "clip", "batch_size", "truncate")
+_MODEL_FIELDS = ("hidden", "layers", "window", "kernel_size", "dropout", "increment", "init_window")
+_TRAIN_FIELDS = ("lr", "weight_decay", "clip", "batch_size", "truncate", "feedback_noise", "average",
+                 "average_decay", "lr_schedule", "join")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,9 +63,9 @@ class Hyper:
 
     Attributes
     ----------
-    hidden, layers, window, kernel_size, dropout :
+    hidden, layers, window, kernel_size, dropout, increment, init_window :
         As in :class:`nnfmu.models.ModelConfig` (``layers``/``window`` None: the architecture's default).
-    lr, weight_decay, clip, batch_size, truncate :
+    lr, weight_decay, clip, batch_size, truncate, feedback_noise, average, average_decay, lr_schedule, join :
         As in :class:`nnfmu.training.TrainConfig`.
     """
 
@@ -73,11 +74,18 @@ class Hyper:
     window: int | None = None
     kernel_size: int = 3
     dropout: float = 0.0
+    increment: bool = False
+    init_window: int = 1
     lr: float = 3e-3
     weight_decay: float = 1e-4
     clip: float = 1.0
     batch_size: int = 64
     truncate: int | None = None
+    feedback_noise: float = 0.0
+    average: str = "none"
+    average_decay: float = 0.999
+    lr_schedule: str = "constant"
+    join: bool = False
 
     def model_config(self, arch: str, n_u: int, n_y: int) -> ModelConfig:
         """The :class:`ModelConfig` of ``arch`` for a system with ``n_u`` inputs and ``n_y`` outputs."""
@@ -122,9 +130,16 @@ class Budget:
     archs, strategies : tuple of str
         The networks trained: every architecture with every strategy.
     epochs, patience : int
-        Maximum epochs and early-stopping patience of every training.
+        Maximum epochs and early-stopping patience of every training: the budget proper, so that
+        a seed gives the same table on any machine.
     max_minutes : float or None
-        Wall-clock cap of one training (minutes); the best epoch so far is kept.
+        Wall-clock safety net of one training (minutes): set well above what the epochs take, it
+        only stops a run that would otherwise hang a study; the best epoch so far is kept and the
+        results say when it fired (stop reason ``time-budget``).
+    seeds, keep :
+        Every network is trained from ``seeds`` seeds (the study's seed, +1, ...); the study
+        scores the kept model (``keep``: 'ensemble' of the seeds, or the 'best' on validation)
+        and reports the spread of the seeds' own test scores next to it. 1: one seed.
     hyper : mapping arch -> Hyper
         Preset hyperparameters per architecture.
     linear : mapping
@@ -155,6 +170,8 @@ class Budget:
     epochs: int
     patience: int
     max_minutes: float | None = None
+    seeds: int = 1
+    keep: str = "ensemble"
     hyper: Mapping[str, Hyper]
     linear: Mapping = field(default_factory=dict)
     tune: bool = False
@@ -169,6 +186,10 @@ class Budget:
         if unknown:
             raise ConfigError(f"budget {self.name!r}: unknown architecture or strategy {unknown}; "
                               f"valid: {', '.join(ARCHS + STRATEGIES)}")
+        if isinstance(self.seeds, bool) or not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ConfigError(f"budget {self.name!r}: seeds must be a positive integer, got {self.seeds!r}")
+        if self.keep not in KEEP:
+            raise ConfigError(f"budget {self.name!r}: unknown keep {self.keep!r}; choose one of {', '.join(KEEP)}")
         if not 0.0 <= self.noise < 1.0:
             raise ConfigError(f"budget {self.name!r}: noise must be a fraction in [0, 1), got {self.noise!r}")
         missing = [a for a in self.archs if a not in self.hyper]

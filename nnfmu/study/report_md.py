@@ -37,12 +37,22 @@ def table_i(doc: dict) -> list[str]:
                 text = f"**{text}**"
             if c in cells and doc["best"].get(c) == cells[c]["name"]:
                 text += "*"
+            if c in cells:
+                text += _spread(cells[c]["training"].get("seeds"))
             texts.append(text)
         lines.append(f"| {arch.upper()} | " + " | ".join(texts) + " |")
     for b in doc["baselines"]:
         lines.append(f"| {b['label']} | " + " | ".join("—" if c != "parallel" else _fmt(b["nrmse"]) for c in cols)
                      + " |")
     return lines
+
+
+def _spread(seeds: dict | None) -> str:
+    """`` (mean, min-max)`` of the seeds' own test scores beside a cell, or nothing for one seed."""
+    if not seeds or not seeds.get("test"):
+        return ""
+    t = seeds["test"]
+    return f" ({_fmt(t['mean'])}, {_fmt(t['min'])}–{_fmt(t['max'])})"
 
 
 def _per_output(doc: dict) -> list[str]:
@@ -64,6 +74,8 @@ def _training(doc: dict) -> list[str]:
     for n in doc["networks"]:
         t = n["training"]
         stop = t["stop_reason"] or ("failed: " + t["error"] if t["error"] else "unfinished")
+        if t.get("seeds"):
+            stop = f"{t['seeds']['keep']} of {t['seeds']['n']} seeds: " + ", ".join(t["seeds"]["stop_reasons"])
         lines.append(f"| {n['label']} | {t['epochs_run']} | {t['best_epoch']} | {_fmt(t['best_valid_nrmse'], 4)} | "
                      f"{_fmt(t['torch_test_nrmse'], 4)} | {_fmt(n['nrmse'], 4)} | {t['seconds']:.0f} | {stop} |")
     return lines
@@ -87,6 +99,11 @@ def _notes(doc: dict) -> list[str]:
         if n["training"]["error"]:
             notes.append(f"- {n['label']}: training failed, the best weights before the failure were used: "
                          f"{n['training']['error']}")
+    for n in doc["networks"]:
+        t = n["training"]
+        if "time-budget" in [t["stop_reason"], *((t.get("seeds") or {}).get("stop_reasons") or [])]:
+            notes.append(f"- {n['label']}: the wall-clock safety net (max_minutes) stopped a training before its "
+                         "epochs were done; this number depends on the machine's speed and load.")
     source = doc["dataset"]["source"]
     if source.get("caveat"):
         notes.append(f"- Data caveat: {source['caveat']}")
@@ -112,7 +129,9 @@ def _notes(doc: dict) -> list[str]:
 
 
 _LEGEND = ("Bold: the better training strategy of each network. *: the best network of each column. The "
-           "baselines are not trained with either strategy; their free-run score stands in the Parallel column.")
+           "baselines are not trained with either strategy; their free-run score stands in the Parallel column. "
+           "With several seeds, a cell scores the kept model (the seeds' ensemble or the best on validation) and "
+           "gives the seeds' own test scores in brackets: (mean, min–max).")
 _TRAINING = ("Validation: free-run NRMSE on the validation split (early stopping, both strategies); torch test "
              "NRMSE: the float64 free run in torch, which the FMU must reproduce.")
 

@@ -51,15 +51,34 @@ def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evalua
     label = f"{STRATEGY_PREFIX[strategy]}-{arch.upper()}"
     entry, evaluation = _score(ds, study, name, label)
     failed = steps.error_file(ckpt_path)
+    seeds = summary.get("seeds") or []
     training = {"epochs_run": summary.get("epochs_run"), "best_epoch": ckpt.get("best_epoch"),
                 "best_valid_nrmse": _clean(summary.get("best_valid_nrmse")),
                 "torch_test_nrmse": _clean(summary.get("test_nrmse")), "stop_reason": summary.get("stop_reason"),
-                "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
-                "error": failed.read_text().strip() if failed.exists() else None}
+                "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))
+                                 + sum(r.get("seconds") or 0.0 for r in seeds)),
+                "error": failed.read_text().strip() if failed.exists() else None,
+                "valid_samples": summary.get("valid_samples"),
+                "seeds": seed_summary(seeds, summary.get("keep"))}
     paths = {k: _rel(study, study.path(k, name)) for k in ("models", "fmus", "scores")}
     return ({"name": name, "label": label, "arch": arch, "strategy": strategy, **entry, "training": training,
              "model_config": ckpt.get("model_config"), "train_config": ckpt.get("train_config"), "paths": paths},
             evaluation)
+
+
+def seed_summary(rows: list[dict], keep: str | None) -> dict | None:
+    """Spread of the seeds' own scores (mean, min, max) and their stop reasons; None for one seed."""
+    if not rows:
+        return None
+
+    def spread(key: str) -> dict:
+        vals = [r[key] for r in rows if r.get(key) is not None and math.isfinite(r[key])]
+        return {"mean": float(np.mean(vals)), "min": float(min(vals)), "max": float(max(vals))} if vals else None
+
+    return {"n": len(rows), "keep": keep, "test": spread("test_nrmse"), "valid": spread("best_valid_nrmse"),
+            "stop_reasons": [r.get("stop_reason") for r in rows],
+            "per_seed": [{k: r.get(k) for k in ("seed", "best_valid_nrmse", "test_nrmse", "best_epoch", "epochs_run",
+                                                "stop_reason", "error")} for r in rows]}
 
 
 def _baselines(ds: Dataset, study) -> list[tuple[dict, Evaluation | None]]:

@@ -116,6 +116,8 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
     model_config = hyper.model_config(arch, ds.n_u, ds.n_y)
     train_config = hyper.train_config(strategy=strategy, epochs=budget.epochs, patience=budget.patience,
                                       seed=seed, max_minutes=budget.max_minutes)
+    if budget.seeds > 1:
+        return _train_seeds(ds, model_config, train_config, budget, ckpt, inputs, progress)
     resume = _resumable(ckpt, inputs, model_config, train_config)
     error_file(ckpt).unlink(missing_ok=True)
     if not resume:
@@ -132,6 +134,29 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
     how = "resumed, " if resume else ""
     return (f"{how}best valid NRMSE {result.best_valid_nrmse:.4f} at epoch {result.best_epoch} of "
             f"{len(result.history) - 1}, stop: {result.stop_reason}")
+
+
+def _train_seeds(ds: Dataset, model_config, train_config, budget: Budget, ckpt: Path, inputs: tuple[Path, ...],
+                 progress: bool) -> str:
+    """``budget.seeds`` seeds of one network (:func:`nnfmu.training.train_seeds`); the kept model goes to ``ckpt``."""
+    import shutil
+
+    from nnfmu.training import train_seeds
+    from nnfmu.training.ensemble import seed_paths
+
+    members = seed_paths(ckpt, [0])[0].parent
+    if members.exists() and any(p.exists() and p.stat().st_mtime > members.stat().st_mtime for p in inputs):
+        shutil.rmtree(members)  # the data changed: the seeds start over
+    ckpt.unlink(missing_ok=True)
+    try:
+        result = train_seeds(ds, model_config, train_config, seeds=budget.seeds, keep=budget.keep, out=ckpt,
+                             jobs=1, progress=progress)
+    except TrainingError as exc:
+        write_text_atomic(error_file(ckpt), f"{exc}\n")
+        return f"FAILED: {exc}"
+    spread = result.spread()
+    return (f"{budget.keep} of {budget.seeds} seeds: valid NRMSE {result.valid_nrmse:.4f}, test {result.test_nrmse:.4f}; "
+            f"seeds' test {spread['mean']:.4f} ({spread['min']:.4f}-{spread['max']:.4f})")
 
 
 # ---- FMUs ----------------------------------------------------------------------------------------

@@ -54,7 +54,8 @@ class SeedsResult:
         The kept model's float64 free-run test scores (from y0; after the init window).
     seeds : list of dict
         Per seed: ``seed``, ``checkpoint``, ``best_valid_nrmse``, ``test_nrmse``, ``test_nrmse_window``,
-        ``best_epoch``, ``epochs_run``, ``stop_reason``.
+        ``best_epoch``, ``epochs_run``, ``stop_reason``, ``error`` (why a failed seed stopped; its best
+        weights before the failure are used).
     checkpoint : Path
     notes : list of str
     """
@@ -86,9 +87,15 @@ def seed_paths(out: Path, seeds: list[int]) -> list[Path]:
     return [folder / f"seed-{s}.pt" for s in seeds]
 
 
+def _error_file(path: Path) -> Path:
+    """Where a seed whose training failed (e.g. a NaN loss) records why; its best weights so far stay in ``path``."""
+    return path.with_suffix(".error.txt")
+
+
 def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str:
-    """'new', 'unfinished' or 'finished'; ConfigError if the file holds a run of other settings."""
+    """'new', 'unfinished' or 'finished' (or failed); ConfigError if the file holds a run of other settings."""
     if not path.exists():
+        _error_file(path).unlink(missing_ok=True)
         return "new"
     try:
         ckpt = load_checkpoint(path)
@@ -97,14 +104,21 @@ def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> st
         return "new"
     if ckpt.get("model_config") != model_config.to_dict() or ckpt.get("train_config") != cfg.to_dict():
         raise ConfigError(f"{path} holds a training with other settings; delete {path.parent} or choose another out")
-    return "finished" if "stop_reason" in (ckpt.get("summary") or {}) else "unfinished"
+    done = "stop_reason" in (ckpt.get("summary") or {}) or _error_file(path).exists()
+    return "finished" if done else "unfinished"
 
 
-def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool) -> None:
+def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool) -> str:
+    """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
     torch.set_num_threads(1)
     state = _member_state(path, model_config, cfg)
-    if state != "finished":
-        train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress)
+    if state == "finished":
+        return "done"
+    try:
+        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress).stop_reason
+    except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
+        _error_file(path).write_text(f"{exc}\n")
+        return "failed"
 
 
 def _train_in_processes(work: list, jobs: int) -> None:
@@ -180,11 +194,15 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     n_jobs = _jobs(jobs, seeds)
     if n_jobs == 1:
         for item in work:
-            _train_one(*item)
+            if _train_one(*item) in ("SIGINT", "SIGTERM"):
+                break
     else:
         for _, mc, c, path, _ in work:  # settings clashes are reported here, before any process starts
             _member_state(path, mc, c)
         _train_in_processes(work, n_jobs)
+    if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
+        raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
+                                f"ones' checkpoints are in {paths[0].parent}: run the same call again to continue")
     return _keep(dataset, cfg, keep, seed_list, paths, out, notes)
 
 
@@ -194,7 +212,9 @@ def _seed_row(seed: int, path: Path) -> dict:
     return {"seed": seed, "checkpoint": str(path), "best_valid_nrmse": summary.get("best_valid_nrmse"),
             "test_nrmse": summary.get("test_nrmse"), "test_nrmse_window": summary.get("test_nrmse_window"),
             "best_epoch": ckpt.get("best_epoch"), "epochs_run": summary.get("epochs_run"),
-            "stop_reason": summary.get("stop_reason")}
+            "stop_reason": summary.get("stop_reason") or "failed",
+            "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
+            "error": _error_file(path).read_text().strip() if _error_file(path).exists() else None}
 
 
 def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,
