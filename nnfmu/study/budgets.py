@@ -50,7 +50,7 @@ from nnfmu.errors import ConfigError, check_options
 from nnfmu.models import ARCHS, ModelConfig
 from nnfmu.training import KEEP, STRATEGIES, TrainConfig
 
-SYSTEMS = ("valve", "arm", "robot")
+SYSTEMS = ("valve", "arm", "robot", "slider")
 STUDY_BUDGETS = ("smoke", "quick", "paper")
 _MODEL_FIELDS = ("hidden", "layers", "window", "kernel_size", "dropout", "increment", "init_window")
 _TRAIN_FIELDS = ("lr", "weight_decay", "clip", "batch_size", "truncate", "feedback_noise", "average",

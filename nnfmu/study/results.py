@@ -88,6 +88,7 @@ def _baselines(ds: Dataset, study) -> list[tuple[dict, Evaluation | None]]:
     order = info.get("order") or info.get("n_x")
     physics = {"valve": "Physics model (the valve model that generated the data, RK4)",
                "arm": "Physics model (the arm model that generated the data, RK4)",
+               "slider": "Physics model (the slider model that generated the data, RK4)",
                "robot": "Arm physics model (nominal parameters, open loop; not fitted to this robot)"}[study.system]
     rows = []
     for name, label, extra in (("linear", "Linear state-space baseline" + (f" (n_x = {order})" if order else ""),
@@ -120,7 +121,7 @@ def _figures(study, ds: Dataset, best: dict, evaluations: dict) -> list[str]:
     chosen = [evaluations[best[s]] for s in STRATEGIES if best[s] and evaluations.get(best[s])]
     with_baselines = chosen[:1] + [evaluations[n] for n in ("linear", "physics") if evaluations.get(n)]
     # Fig. 2 (valve): one representative test trajectory; Fig. 3 (robot, arm): the whole test record.
-    index = None if study.system == "valve" else 0
+    index = None if study.system in ("valve", "slider") else 0
     out = []
     for stem, evs in (("best_parallel_vs_series_parallel", chosen), ("best_network_vs_baselines", with_baselines)):
         if evs:

@@ -55,7 +55,7 @@ def trim(ds: Dataset, budget: Budget, seed: int) -> Dataset:
 
 def prepare_data(system: str, budget: Budget, seed: int, source: Path | None, out: Path,
                  progress: bool) -> str:
-    """Generate (valve, arm) or load (``source``) the data, trim it to the budget and save it at ``out``."""
+    """Generate (valve, arm, slider) or load (``source``) the data, trim it to the budget and save it at ``out``."""
     if source is not None:
         ds = load_source(source)
     elif system == "robot":
@@ -188,9 +188,9 @@ def export_linear(model_file: Path, fmu: Path, name: str) -> str:
 
 def physics_model(system: str):
     """The physics reference model of ``system`` (the robot is scored against the arm model)."""
-    from nnfmu.physics import arm_system, valve_system
+    from nnfmu.physics import arm_system, slider_system, valve_system
 
-    return valve_system().model() if system == "valve" else arm_system().model()
+    return {"valve": valve_system, "slider": slider_system}.get(system, arm_system)().model()
 
 
 def export_physics(system: str, fmu: Path) -> str:
