@@ -3,7 +3,8 @@
 Public API (names are imported on first use, so ``import nnfmu`` stays light):
 
 - data: :class:`Dataset`, :class:`Channel`, :class:`Trajectories`, :func:`load_dataset`,
-  :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_robot_benchmark`
+  :func:`save_dataset`, :func:`from_arrays`, :func:`load_csv`, :func:`load_files` (CSV, .mat, .npz),
+  :func:`from_benchmark` (the nonlinear benchmarks' data objects), :func:`load_robot_benchmark`
 - scoring: :func:`nrmse`; :func:`evaluate` (co-simulate FMUs in fmpy on a dataset split and score them)
 - export: :func:`casadi_model` (a trained network as CasADi ``(init, step)``), :func:`build_fmu`
 - the study: :func:`reproduce` (``nnfmu reproduce``), :func:`run_demo` (``nnfmu demo``)
@@ -30,6 +31,8 @@ _LAZY = {
     "save_dataset": "nnfmu.data",
     "from_arrays": "nnfmu.data",
     "load_csv": "nnfmu.data",
+    "load_files": "nnfmu.data",
+    "from_benchmark": "nnfmu.data",
     "load_robot_benchmark": "nnfmu.data",
     "nrmse": "nnfmu.metrics",
     "NrmseResult": "nnfmu.metrics",

@@ -200,8 +200,9 @@ class Evaluation:
     result: NrmseResult
     predictions: list[np.ndarray] = field(repr=False)
 
-    def to_json(self, output_names: Sequence[str]) -> dict:
-        return {"name": self.name, "fmu": str(self.path), **self.result.to_json(output_names)}
+    def to_json(self, outputs: Sequence) -> dict:
+        """Name, FMU path and the scores of :meth:`NrmseResult.to_json` (``outputs``: names or Channels)."""
+        return {"name": self.name, "fmu": str(self.path), **self.result.to_json(outputs)}
 
 
 def evaluate(paths: Sequence[str | os.PathLike], dataset: Dataset, split: str = "test",

@@ -1,8 +1,10 @@
-"""NRMSE, the one scoring rule of nnfmu (DESIGN.md, "NRMSE: the scoring rule").
+"""NRMSE, the one scoring rule of nnfmu (docs/design.md, "NRMSE: the scoring rule"), with RMSE and fit %.
 
 For a trajectory and output k::
 
     NRMSE_k = RMSE_k / std_k,   std_k = std of the measured y_k over the horizon (ddof 0)
+    RMSE_k  = sqrt(mean((y_k - yhat_k)^2)), in the output's own unit
+    fit_k   = 100 (1 - NRMSE_k) %     (the "fit" of system identification toolboxes)
 
 The trajectory's NRMSE is the mean over outputs, and a dataset's NRMSE is the
 mean over its trajectories. The horizon is every sample handed in; the
@@ -12,7 +14,8 @@ sample is the measured ``y0``.
 The paper prints the sum over outputs inside the square root, but compares its
 robot results with the benchmark's baseline, which averages per-joint NRMSE;
 nnfmu uses the per-output mean everywhere so that both datasets are scored
-like the benchmark.
+like the benchmark. RMSE and fit are aggregated the same way (mean over
+trajectories); RMSE is never averaged over outputs, whose units differ.
 """
 
 from __future__ import annotations
@@ -39,20 +42,64 @@ class NrmseResult:
         Mean over trajectories: the dataset's NRMSE.
     output_mean : ndarray, shape (n_y,)
         Per-output NRMSE averaged over trajectories.
+    rmse : ndarray, shape (n_traj, n_y)
+        RMSE of each output on each trajectory, in the output's unit (None only for a result built by hand).
     """
 
     per_output: np.ndarray
     per_trajectory: np.ndarray
     mean: float
     output_mean: np.ndarray
+    rmse: np.ndarray | None = None
 
-    def to_json(self, output_names: Sequence[str] | None = None) -> dict:
-        names = list(output_names) if output_names is not None else [f"y{j + 1}" for j in range(len(self.output_mean))]
+    @property
+    def rmse_output_mean(self) -> np.ndarray:
+        """Per-output RMSE averaged over trajectories, shape (n_y,), in each output's unit."""
+        return self.rmse.mean(axis=0)
+
+    @property
+    def fit(self) -> float:
+        """Fit in percent, ``100 (1 - NRMSE)``: 100 is perfect, 0 is no better than the measured mean."""
+        return fit_percent(self.mean)
+
+    def to_json(self, outputs: Sequence | None = None) -> dict:
+        """Scores as JSON: the totals, then per output and per trajectory (each with NRMSE, RMSE and fit %).
+
+        ``outputs`` are the output names, or :class:`~nnfmu.data.Channel` objects whose units are
+        recorded beside the RMSE. The keys ``nrmse``, ``per_output`` (name -> NRMSE) and
+        ``per_trajectory`` (NRMSE list) stay as in earlier versions.
+        """
+        n_y = len(self.output_mean)
+        outputs = list(outputs) if outputs is not None else [f"y{j + 1}" for j in range(n_y)]
+        names = [getattr(o, "name", o) for o in outputs]
+        units = [getattr(o, "unit", None) for o in outputs]
+        rmse = self.rmse if self.rmse is not None else np.full(self.per_output.shape, np.nan)
+
+        def cell(nrmse_value, rmse_value, unit=None) -> dict:
+            out = {"nrmse": float(nrmse_value), "rmse": _finite(rmse_value), "fit_percent": fit_percent(nrmse_value)}
+            return out if unit is None else {"unit": unit, **out}
+
         return {
             "nrmse": float(self.mean),
+            "fit_percent": self.fit,
             "per_output": {n: float(v) for n, v in zip(names, self.output_mean)},
             "per_trajectory": [float(v) for v in self.per_trajectory],
+            "outputs": {n: cell(v, r, u) for n, v, r, u in zip(names, self.output_mean, rmse.mean(axis=0), units)},
+            "trajectories": [{"index": i, "nrmse": float(self.per_trajectory[i]),
+                              "fit_percent": fit_percent(self.per_trajectory[i]),
+                              "outputs": {n: cell(v, r) for n, v, r in zip(names, self.per_output[i], rmse[i])}}
+                             for i in range(len(self.per_trajectory))],
         }
+
+
+def fit_percent(nrmse_value: float) -> float:
+    """``100 (1 - NRMSE)``: the fit index in percent of one NRMSE value."""
+    return float(100.0 * (1.0 - nrmse_value))
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def _as_list(a, what: str) -> list[np.ndarray]:
@@ -83,7 +130,7 @@ def nrmse(y_true, y_pred) -> NrmseResult:
     ts, ps = _as_list(y_true, "y_true"), _as_list(y_pred, "y_pred")
     if len(ts) != len(ps):
         raise ShapeError(f"y_true has {len(ts)} trajectories but y_pred has {len(ps)}")
-    rows = []
+    rows, rmse_rows = [], []
     for i, (t, p) in enumerate(zip(ts, ps)):
         if t.shape != p.shape or t.ndim != 2:
             raise ShapeError(f"trajectory {i}: y_true has shape {t.shape} but y_pred has {p.shape}; "
@@ -96,11 +143,12 @@ def nrmse(y_true, y_pred) -> NrmseResult:
             j = int(np.flatnonzero(std == 0)[0])
             raise MetricError(f"trajectory {i}: measured output {j} is constant, so its NRMSE is undefined; "
                               "drop that trajectory or output from the scored split")
-        rows.append(np.sqrt(np.mean((t - p) ** 2, axis=0)) / std)
+        rmse_rows.append(np.sqrt(np.mean((t - p) ** 2, axis=0)))
+        rows.append(rmse_rows[-1] / std)
     if not rows:
         raise ShapeError("no trajectories to score")
     if len({r.shape for r in rows}) > 1:
         raise ShapeError("trajectories have different numbers of outputs")
     per_output = np.vstack(rows)
     per_traj = per_output.mean(axis=1)
-    return NrmseResult(per_output, per_traj, float(per_traj.mean()), per_output.mean(axis=0))
+    return NrmseResult(per_output, per_traj, float(per_traj.mean()), per_output.mean(axis=0), np.vstack(rmse_rows))

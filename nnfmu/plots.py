@@ -4,11 +4,15 @@ Measured outputs are dashed black lines; each model is a coloured line
 labelled with its NRMSE on that trajectory. The output axes are scaled to the
 measurement (with a margin), so that one model drifting far away does not
 flatten the others; its line leaves the axes and its legend entry says so.
+The legend sits below the axes, in as many columns as fit the figure's width
+(long names wrap), and the figure grows to hold it, so that ten models with
+long names stay readable.
 """
 
 from __future__ import annotations
 
 import os
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
@@ -29,6 +33,10 @@ def _measured_limits(y: np.ndarray, margin: float = 0.5) -> tuple[float, float]:
     lo, hi = float(np.min(y)), float(np.max(y))
     pad = margin * (hi - lo) if hi > lo else max(abs(lo), 1.0) * 0.1
     return lo - pad, hi + pad
+
+
+def _axis_label(channel) -> str:
+    return f"{channel.name} [{channel.unit}]" if channel.unit else channel.name
 
 
 def _time_axis(n: int, Ts: float) -> tuple[np.ndarray, str]:
@@ -60,13 +68,14 @@ def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.Path
     t, t_label = _time_axis(len(u), dataset.Ts)
     show_u = dataset.n_u <= max_inputs
     n_rows = (dataset.n_u if show_u else 0) + dataset.n_y
-    fig, axes = plt.subplots(n_rows, 1, sharex=True, figsize=(8, 1.6 * n_rows + 0.8), squeeze=False)
+    fig, axes = plt.subplots(n_rows, 1, sharex=True, figsize=(8, 1.6 * n_rows + 0.8), squeeze=False,
+                             layout="constrained")
     axes = axes[:, 0]
     row = 0
     if show_u:
         for j, ch in enumerate(dataset.inputs):
             axes[row].plot(t, u[:, j], color="tab:gray", lw=1.0)
-            axes[row].set_ylabel(f"{ch.name} [{ch.unit}]")
+            axes[row].set_ylabel(_axis_label(ch))
             row += 1
     limits = [_measured_limits(y[:, j]) for j in range(dataset.n_y)]
     leaves = [any(np.any((ev.predictions[idx][:, j] < lo) | (ev.predictions[idx][:, j] > hi))
@@ -79,13 +88,29 @@ def plot_trajectory(dataset: Dataset, evaluations: Sequence, path: str | os.Path
             label = f"{ev.name} ({ev.result.per_trajectory[idx]:.3f}{note})" if j == 0 else None
             ax.plot(t, ev.predictions[idx][:, j], lw=1.0, label=label)
         ax.set_ylim(*limits[j])
-        ax.set_ylabel(f"{ch.name} [{ch.unit}]")
+        ax.set_ylabel(_axis_label(ch))
     axes[-1].set_xlabel(t_label)
-    fig.legend(loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=min(4, len(evaluations) + 1), fontsize="small",
-               frameon=False)
-    fig.suptitle(f"{split} trajectory {idx}: predicted vs measured (NRMSE in brackets)", y=0.995, fontsize="medium")
-    fig.tight_layout(rect=(0, 0, 1, 0.92))
+    fig.suptitle(f"{split} trajectory {idx}: predicted vs measured (NRMSE in brackets)", fontsize="medium")
+    _legend_below(fig, axes[row])
     try:
         return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"), suffix=".png")
     finally:
         plt.close(fig)
+
+
+def _legend_below(fig, ax, wrap: int = 60) -> None:
+    """The legend of ``ax``'s lines below the axes, in the most columns that fit the figure's width.
+
+    Labels longer than ``wrap`` characters wrap onto more lines. The figure grows by the
+    legend's height, so the axes keep their size.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    labels = [textwrap.fill(text, wrap) for text in labels]
+    renderer = fig.canvas.get_renderer()
+    for ncol in range(min(len(labels), 4), 0, -1):
+        legend = fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize="small", frameon=False)
+        if ncol == 1 or legend.get_window_extent(renderer).width <= 0.98 * fig.bbox.width:
+            break
+        legend.remove()
+    height = legend.get_window_extent(renderer).height / fig.dpi
+    fig.set_figheight(fig.get_figheight() + height)

@@ -1,6 +1,6 @@
 """The one model contract every stage meets: a discrete-time ``(init, step)`` pair.
 
-DESIGN.md's "one idea": the networks, the linear baseline, the physics models
+docs/design.md's "one idea": the networks, the linear baseline, the physics models
 (discretised with a fixed-step RK4) and hybrids all reduce to::
 
     init(y0, u0)     -> x0                 # (p) optional parameter vector as a 3rd input;

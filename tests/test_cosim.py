@@ -102,7 +102,7 @@ def test_failing_fmu_reports_its_own_message():
 
 
 def test_evaluate_cli_prints_table_writes_json_and_plot(tmp_path):
-    ds, _ = _dataset(perturbation=0.02)
+    ds, errs = _dataset(perturbation=0.02)
     save_dataset(ds, tmp_path / "data")
     fmu = built_fmu("linear", 2)
     run = subprocess.run([sys.executable, "-m", "nnfmu", "evaluate", "--data", str(tmp_path / "data"), str(fmu),
@@ -113,11 +113,26 @@ def test_evaluate_cli_prints_table_writes_json_and_plot(tmp_path):
     (model,) = doc["models"]
     assert model["name"] == fmu.stem and np.isfinite(model["nrmse"])
     assert f"{model['nrmse']:.4f}" in run.stdout and "pos" in run.stdout
+    # RMSE in each output's unit and fit % beside NRMSE, per model, output and trajectory
+    rmse = np.array([np.sqrt(np.mean(e ** 2, axis=0)) for e in errs])  # the known error, (n_traj, n_y)
+    assert model["fit_percent"] == pytest.approx(100 * (1 - model["nrmse"]), rel=1e-12)
+    for j, (name, unit) in enumerate((("pos", "m"), ("vel", "m/s"))):
+        out = model["outputs"][name]
+        assert out["unit"] == unit and out["rmse"] == pytest.approx(rmse[:, j].mean(), rel=1e-6)
+        assert out["fit_percent"] == pytest.approx(100 * (1 - out["nrmse"]), rel=1e-12)
+        assert f"{name} [{unit}]" in run.stdout and f"{out['rmse']:.4g}" in run.stdout
+    assert [t["index"] for t in model["trajectories"]] == [0, 1, 2]
+    assert model["trajectories"][1]["outputs"]["vel"]["rmse"] == pytest.approx(rmse[1, 1], rel=1e-6)
+    assert "fit %" in run.stdout and f"{model['fit_percent']:.2f}" in run.stdout
     png = tmp_path / "plots" / "test_trajectory.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = subprocess.run([sys.executable, "-m", "nnfmu", "evaluate", "--data", str(tmp_path / "data"),
                           str(tmp_path / "missing.fmu")], capture_output=True, text=True)
     assert bad.returncode == 2 and "missing.fmu not found" in bad.stderr
+    out = subprocess.run([sys.executable, "-m", "nnfmu", "evaluate", "--data", str(tmp_path / "data"), str(fmu),
+                          "-o", str(tmp_path / "all")], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.name for p in (tmp_path / "all").iterdir()) == ["scores.json", "test_trajectory.png"]
 
 
 def test_plot_axes_follow_the_measurement_when_a_model_drifts_away(tmp_path, monkeypatch):

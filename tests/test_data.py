@@ -1,4 +1,4 @@
-"""The dataset container and its folder format (DESIGN.md, "Dataset on disk")."""
+"""The dataset container and its folder format (docs/design.md, "Dataset on disk")."""
 
 import json
 

@@ -102,7 +102,8 @@ def test_csv_loader(tmp_path):
                   inputs=["volt"], outputs=["speed"], time_column="time", units={"volt": "V"})
     assert ds.Ts == 0.5 and ds.train.n_traj == 2 and ds.inputs[0].unit == "V"
     np.testing.assert_allclose(ds.test.u[0][:, 0], np.sin(t) + 2.0)
-    with pytest.raises(DataError, match=r"has no column\(s\) \['torque'\]"):
-        load_csv({"train": tmp_path / "a.csv"}, inputs=["torque"], outputs=["speed"], Ts=0.5)
-    with pytest.raises(DataError, match="give Ts"):
-        load_csv({"train": tmp_path / "a.csv"}, inputs=["volt"], outputs=["speed"])
+    with pytest.raises(DataError, match=r"has no column 'torque'; its columns are: time, volt, speed"):
+        load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["torque"], outputs=["speed"],
+                 Ts=0.5)
+    with pytest.raises(DataError, match="give either the sample time Ts"):
+        load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["volt"], outputs=["speed"])

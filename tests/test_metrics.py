@@ -1,4 +1,4 @@
-"""NRMSE against values computed by hand (DESIGN.md's scoring rule)."""
+"""NRMSE against values computed by hand (docs/design.md's scoring rule)."""
 
 import numpy as np
 import pytest

@@ -36,3 +36,6 @@ def test_notebook_runs(path, tmp_path):
     last = book.cells[-1]
     printed = "".join(o.get("text", "") for o in last.outputs if o.output_type == "stream")
     assert "all checks passed" in printed
+    warned = [o["text"] for c in book.cells if c.cell_type == "code" for o in c.outputs
+              if o.output_type == "stream" and o.name == "stderr" and "Warning" in o["text"]]
+    assert not warned, warned  # e.g. tqdm's "IProgress not found" when the widget bar cannot be drawn

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import argparse
 
+from nnfmu.cli._text import description
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="the main job in minutes: valve data, parallel vs series-parallel GRU, "
                                     "linear and physics baselines, all as FMUs scored in fmpy",
-                       description=__doc__.split("\n\n", 1)[1].replace("\n", " "))
-    p.add_argument("--out", default="demo-output", help="output folder (default demo-output; re-use it to resume)")
+                       description=description(__doc__))
+    p.add_argument("-o", "--out", default="demo-output",
+                   help="output folder (default demo-output; re-use it to resume)")
     p.add_argument("--seed", type=int, default=0, help="seeds the data and the training (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)

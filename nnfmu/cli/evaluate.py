@@ -1,4 +1,9 @@
-"""``nnfmu evaluate --data DIR A.fmu B.fmu ...``: co-simulate FMUs in fmpy and score them with NRMSE."""
+"""``nnfmu evaluate --data DIR A.fmu B.fmu ...``: co-simulate FMUs in fmpy and score them.
+
+Prints, per model, the NRMSE with the fit % next to it and the per-output
+NRMSE, then the RMSE of each output in its own unit; ``--json`` (or ``-o``)
+writes all three per model, output and trajectory.
+"""
 
 from __future__ import annotations
 
@@ -9,12 +14,20 @@ from pathlib import Path
 
 from nnfmu.atomic import write_text_atomic
 
+_DESCRIPTION = (
+    "Co-simulate FMUs in fmpy on a dataset split, each trajectory from its measured initial outputs, and score "
+    "them: NRMSE (RMSE over the standard deviation of the measurement, per output, then the mean over outputs and "
+    "trajectories), fit % = 100 (1 - NRMSE), and the RMSE of each output in its own unit."
+)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("evaluate", help="co-simulate FMUs on a dataset split in fmpy and print their NRMSE")
+    p = sub.add_parser("evaluate", help="co-simulate FMUs on a dataset split in fmpy and print NRMSE, fit % and RMSE",
+                       description=_DESCRIPTION)
     p.add_argument("fmus", nargs="+", help="FMU files to score")
     p.add_argument("--data", required=True, help="dataset folder")
     p.add_argument("--split", default="test", choices=["train", "valid", "test"], help="split to score (default test)")
+    p.add_argument("-o", "--out", metavar="DIR", help="write scores.json and the plot into this folder")
     p.add_argument("--json", help="write the scores to this JSON file")
     p.add_argument("--plots", help="write a PNG of predicted vs measured outputs into this folder")
     p.add_argument("--trajectory", type=int, help="trajectory to plot (default: the median-scored one)")
@@ -28,15 +41,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run)
 
 
-def format_table(evaluations, output_names) -> str:
-    """A plain-text table: one row per model, the mean NRMSE and the per-output values."""
-    width = max([len("model")] + [len(ev.name) for ev in evaluations])
-    head = f"{'model':<{width}}  {'NRMSE':>8}  " + "  ".join(f"{n:>8}" for n in output_names)
-    lines = [head, "-" * len(head)]
-    for ev in evaluations:
-        per = "  ".join(f"{v:8.4f}" for v in ev.result.output_mean)
-        lines.append(f"{ev.name:<{width}}  {ev.result.mean:8.4f}  {per}")
-    return "\n".join(lines)
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    widths = [max(len(r[j]) for r in [header] + rows) for j in range(len(header))]
+    line = lambda r: "  ".join(c.ljust(w) if j == 0 else c.rjust(w) for j, (c, w) in enumerate(zip(r, widths)))
+    head = line(header)
+    return [head, "-" * len(head)] + [line(r) for r in rows]
+
+
+def format_table(evaluations, outputs) -> str:
+    """Plain-text tables: per model the NRMSE, fit % and per-output NRMSE; then the RMSE of each output.
+
+    ``outputs`` are the dataset's output Channels (names and units).
+    """
+    names = [getattr(o, "name", o) for o in outputs]
+    scores = [["model", "NRMSE", "fit %"] + names]
+    scores += [[ev.name, f"{ev.result.mean:.4f}", f"{ev.result.fit:.2f}"]
+               + [f"{v:.4f}" for v in ev.result.output_mean] for ev in evaluations]
+    units = [f"{n} [{getattr(o, 'unit', '') or '-'}]" for n, o in zip(names, outputs)]
+    rmse = [["model"] + units] + [[ev.name] + [f"{v:.4g}" for v in ev.result.rmse_output_mean] for ev in evaluations]
+    return "\n".join(["NRMSE and fit % (mean over outputs), then the NRMSE of each output:"]
+                     + _table(scores[0], scores[1:]) + ["", "RMSE of each output, in its unit:"]
+                     + _table(rmse[0], rmse[1:]))
 
 
 def _protocol(args: argparse.Namespace, ds):
@@ -54,21 +79,28 @@ def _run(args: argparse.Namespace) -> int:
     ds = load_dataset(args.data)
     protocol = _protocol(args, ds)
     evaluations = evaluate(args.fmus, ds, split=args.split, progress=True, protocol=protocol)
-    print(f"NRMSE on {args.data} ({args.split}: {ds.split(args.split).n_traj} trajectories, {protocol.describe()})")
-    print(format_table(evaluations, ds.output_names))
-    if args.json:
+    print(f"{args.split} split of {args.data}: {ds.split(args.split).n_traj} trajectories, {protocol.describe()}; "
+          "fit % = 100 (1 - NRMSE)")
+    print(format_table(evaluations, ds.outputs))
+    out = Path(args.out) if args.out else None
+    json_path = args.json or (out / "scores.json" if out else None)
+    if json_path:
         doc = {"data": str(args.data), "split": args.split, "Ts": ds.Ts, "protocol": protocol.to_json(),
-               "models": [ev.to_json(ds.output_names) for ev in evaluations]}
-        write_text_atomic(args.json, json.dumps(doc, indent=2) + "\n")
-        print(f"scores written to {args.json}")
-    if args.plots:
+               "outputs": [c.to_json() for c in ds.outputs],
+               "scoring": "per trajectory and output: RMSE in the output's unit, NRMSE = RMSE / std(measured), "
+                          "fit_percent = 100 (1 - NRMSE); totals: mean over outputs (not RMSE), then over trajectories",
+               "models": [ev.to_json(ds.outputs) for ev in evaluations]}
+        write_text_atomic(json_path, json.dumps(doc, indent=2) + "\n")
+        print(f"scores written to {json_path}")
+    plots = args.plots or (out if out else None)
+    if plots:
         from nnfmu.plots import plot_trajectory
 
         measured = ds.split(args.split).y
         shown = [dataclasses.replace(ev, predictions=[protocol.padded(p, len(y)) for p, y in zip(ev.predictions,
                                                                                                     measured)])
                  for ev in evaluations]
-        png = plot_trajectory(ds, shown, Path(args.plots) / f"{args.split}_trajectory.png",
+        png = plot_trajectory(ds, shown, Path(plots) / f"{args.split}_trajectory.png",
                               split=args.split, index=args.trajectory)
         print(f"plot written to {png}")
     return 0

@@ -17,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Simulate a physics reference model (physics.md) and write its dataset "
                                    "folder (meta.json, train.npz, test.npz).")
     p.add_argument("system", choices=SYSTEMS, help="the physics model to simulate")
-    p.add_argument("--out", required=True, help="dataset folder to write")
+    p.add_argument("-o", "--out", required=True, help="dataset folder to write")
     p.add_argument("--size", default=None,
                    help="valve: paper (default; 900 x 500 train, 30 x 3500 test) or small; "
                         "arm: benchmark (default; ~40 000 train samples, one 3600-sample test record) or small; "

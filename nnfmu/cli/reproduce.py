@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="run the paper's study: 5 networks x 2 strategies + baselines, as FMUs",
                        description=_DESCRIPTION)
     p.add_argument("system", choices=["valve", "arm", "robot", "slider"], help="which system")
-    p.add_argument("--out", required=True, help="study folder (created; re-use it to resume)")
+    p.add_argument("-o", "--out", required=True, help="study folder (created; re-use it to resume)")
     p.add_argument("--budget", choices=["smoke", "quick", "paper"], default="quick",
                    help="data size, training length and hyperparameters (default quick)")
     p.add_argument("--data", help="dataset folder, or the robot benchmark's .mat file (required for robot)")

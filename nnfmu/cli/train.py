@@ -39,9 +39,14 @@ _TRAIN_OPTIONS = (
     ("--epochs", "epochs", int, "maximum epochs (default 100)"),
     ("--patience", "patience", int, "early-stopping patience in epochs, 0 = off (default 15)"),
     ("--batch-size", "batch_size", int, "trajectories or windows per step (default 64)"),
-    ("--truncate", "truncate", int, "train on windows of this many samples (multiple shooting; default: whole)"),
+    ("--truncate", "truncate", int, "train on windows of N samples (default: whole trajectories): each epoch "
+     "cuts every trajectory into consecutive, non-overlapping windows (stride N) from a random offset below N, "
+     "drops the shorter tail, starts each window from its measured first output and shuffles all windows "
+     "into batches"),
     ("--seed", "seed", int, "random seed (default 0)"),
-    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none)"),
+    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none). Alone (without --epochs "
+     "and --patience) it means: train until the budget is spent and keep the best epoch; the progress bar shows "
+     "the time left"),
     ("--feedback-noise", "feedback_noise", float,
      "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
@@ -60,6 +65,9 @@ _FLAG_OPTIONS = (
 _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
             "valid_horizon": ("auto", "split", "joined")}
 
+
+# --max-minutes alone: no epoch limit that a budget could reach, and no early stopping
+BUDGET_EPOCHS = 10**9
 
 # (option, HybridConfig field, type, help): only with --arch hybrid.
 _HYBRID_OPTIONS = (
@@ -87,7 +95,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="network architecture, or hybrid (physics + neural correction; see --physics)")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"],
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
-    p.add_argument("--out", required=True, help="checkpoint file to write (.pt)")
+    p.add_argument("-o", "--out", required=True, help="checkpoint file to write (.pt)")
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
         p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
     for flag, dest, text in _FLAG_OPTIONS:
@@ -120,6 +128,8 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
     changes = _given(args, _TRAIN_OPTIONS)
     if args.join is not None:
         changes["join"] = True
+    if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
+        changes.update(epochs=BUDGET_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
         changes["strategy"] = args.strategy
     if hybrid and changes.get("strategy", "parallel") != "parallel":

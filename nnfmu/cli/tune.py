@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 
+from nnfmu.cli._text import description
+
 _TRAIN_FLAGS = {"hidden": "--hidden", "layers": "--layers", "window": "--window", "dropout": "--dropout",
                 "lr": "--lr", "weight_decay": "--weight-decay", "clip": "--clip", "batch_size": "--batch-size",
                 "truncate": "--truncate"}
@@ -18,7 +20,7 @@ _TRAIN_FLAGS = {"hidden": "--hidden", "layers": "--layers", "window": "--window"
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tune", help="grid-search an architecture's hyperparameters on Ray Tune (extra 'tune')",
-                       description=__doc__.split("\n\n", 1)[1].replace("\n", " "))
+                       description=description(__doc__))
     p.add_argument("--data", required=True, help="dataset folder")
     p.add_argument("--arch", required=True, choices=["mlp", "rnn", "lstm", "gru", "tcn"])
     p.add_argument("--strategy", choices=["parallel", "series-parallel"], default="parallel",
@@ -39,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="training seed of the first repetition (default 0)")
     p.add_argument("--storage",
                    help="folder for Ray's trial records (default ~/ray_results; on a cluster, a shared one)")
-    p.add_argument("--out", default="best.json", help="where to write the best hyperparameters (default best.json)")
+    p.add_argument("-o", "--out", default="best.json",
+                   help="where to write the best hyperparameters (default best.json)")
     p.set_defaults(func=_run)
 
 

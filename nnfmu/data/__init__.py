@@ -9,6 +9,8 @@ from nnfmu.data.dataset import (
     from_arrays,
     make_trajectories,
 )
+from nnfmu.data.benchmarks import from_benchmark
+from nnfmu.data.importing import load_files
 from nnfmu.data.loaders import load_csv, load_robot_benchmark
 from nnfmu.data.storage import load_dataset, save_dataset
 
@@ -19,6 +21,8 @@ __all__ = [
     "NormStats",
     "Trajectories",
     "from_arrays",
+    "from_benchmark",
+    "load_files",
     "make_trajectories",
     "load_csv",
     "load_robot_benchmark",

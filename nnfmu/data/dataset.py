@@ -134,7 +134,16 @@ class Trajectories:
 
 
 def _as_trajectory_list(arr, what: str) -> list[np.ndarray]:
-    """Accept a 3-D array ``(n_traj, n_steps, n)``, a 2-D array ``(n_steps, n)`` or a list of 2-D."""
+    """Accept a 3-D array ``(n_traj, n_steps, n)``, a 2-D array ``(n_steps, n)`` or a list of 2-D arrays.
+
+    Nested Python lists of numbers count as arrays: ``[[0.1], [0.2], ...]`` is one trajectory of
+    shape ``(n_steps, 1)``; a list whose items are numpy arrays is a list of trajectories.
+    """
+    if not isinstance(arr, np.ndarray) and not np.isscalar(arr) and not any(isinstance(a, np.ndarray) for a in arr):
+        try:
+            arr = np.asarray(arr, dtype=np.float64)
+        except ValueError:  # ragged nested lists: trajectories of different lengths
+            pass
     if isinstance(arr, np.ndarray) or np.isscalar(arr):
         arr = np.asarray(arr, dtype=np.float64)
         if arr.ndim == 3:
@@ -183,6 +192,10 @@ class Dataset:
     splits : mapping of split name to :class:`Trajectories`
     source : dict
         How the data were made or where they came from (JSON-serialisable).
+    init_window : int or None
+        Samples at the start of every test trajectory that a benchmark gives the model to
+        initialise its state before scoring starts (``state_initialization_window_length`` of
+        the nonlinear benchmarks); None when the data prescribe none.
     """
 
     Ts: float
@@ -190,6 +203,7 @@ class Dataset:
     outputs: tuple[Channel, ...]
     splits: Mapping[str, Trajectories]
     source: Mapping = field(default_factory=dict)
+    init_window: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "inputs", tuple(_as_channel(c) for c in self.inputs))
@@ -198,6 +212,11 @@ class Dataset:
         splits = sorted(dict(self.splits).items(), key=lambda kv: order.get(kv[0], len(order)))
         object.__setattr__(self, "splits", dict(splits))
         object.__setattr__(self, "source", dict(self.source))
+        if self.init_window is not None:
+            if isinstance(self.init_window, bool) or not isinstance(self.init_window, (int, np.integer)) \
+                    or self.init_window < 0:
+                raise DataError(f"init_window must be a number of samples >= 0 or None, got {self.init_window!r}")
+            object.__setattr__(self, "init_window", int(self.init_window))
         validate(self)
 
     @property
@@ -240,23 +259,30 @@ class Dataset:
     def replace(self, **changes) -> "Dataset":
         return dataclasses.replace(self, **changes)
 
-    def with_validation(self, fraction: float = 0.1, seed: int = 0) -> "Dataset":
+    def with_validation(self, fraction: float | None = 0.1, seed: int = 0, *, n_traj: int | None = None) -> "Dataset":
         """Return a copy whose ``valid`` split is carved out of ``train``.
 
-        With several training trajectories, ``fraction`` of them (at least one)
-        are chosen at random with ``seed``. A single training trajectory is cut
-        in time instead: its last ``fraction`` becomes the validation record.
+        With several training trajectories, ``n_traj`` of them, or else ``fraction`` of them (at
+        least one, at most all but one), are chosen at random with ``seed``. A single training
+        trajectory is cut in time instead: its last ``fraction`` becomes the validation record.
         An existing ``valid`` split is kept unchanged.
         """
         if self.valid is not None:
             return self
-        if not 0.0 < fraction < 1.0:
-            raise DataError(f"validation fraction must be in (0, 1), got {fraction}")
         train = self.train
+        if n_traj is not None and train.n_traj == 1:
+            raise DataError("the training split is one record: give a validation fraction (its last part "
+                            "becomes the validation record), not a number of trajectories")
+        if n_traj is not None:
+            if isinstance(n_traj, bool) or not isinstance(n_traj, int) or not 1 <= n_traj < train.n_traj:
+                raise DataError(f"cannot move {n_traj!r} of the {train.n_traj} training trajectories to validation; "
+                                f"give a number from 1 to {train.n_traj - 1}, or a fraction")
+        elif fraction is None or not 0.0 < fraction < 1.0:
+            raise DataError(f"validation fraction must be in (0, 1), got {fraction}")
         splits = dict(self.splits)
         if train.n_traj >= 2:
             rng = np.random.default_rng(seed)
-            n_valid = max(1, int(round(fraction * train.n_traj)))
+            n_valid = n_traj or min(train.n_traj - 1, max(1, int(round(fraction * train.n_traj))))
             order = rng.permutation(train.n_traj)
             splits["valid"] = train.subset(sorted(order[:n_valid]))
             splits["train"] = train.subset(sorted(order[n_valid:]))
@@ -266,6 +292,24 @@ class Dataset:
             splits["train"] = Trajectories((train.u[0][:cut],), (train.y[0][:cut],))
             splits["valid"] = Trajectories((train.u[0][cut:],), (train.y[0][cut:],))
         return self.replace(splits=splits)
+
+    def with_units(self, units: Mapping[str, str] | Sequence[str] | None) -> "Dataset":
+        """Return a copy whose channels carry ``units``: channel name -> unit, or one unit per channel
+        (inputs first). Channels not named keep their unit; a name that is no channel raises."""
+        names = self.input_names + self.output_names
+        if not units:
+            return self
+        if not isinstance(units, Mapping):
+            units = list(units)
+            if len(units) != len(names):
+                raise DataError(f"got {len(units)} units for {len(names)} channels {names}; give one per channel "
+                                "(inputs first) or map them by name (name=unit)")
+            units = dict(zip(names, units))
+        unknown = sorted(set(units) - set(names))
+        if unknown:
+            raise DataError(f"units given for {unknown}, which are not channels; the channels are {names}")
+        relabel = [Channel(c.name, str(units.get(c.name, c.unit)), c.description) for c in self.inputs + self.outputs]
+        return self.replace(inputs=tuple(relabel[:self.n_u]), outputs=tuple(relabel[self.n_u:]))
 
     def with_measurement_noise(self, fraction: float, seed: int = 0) -> "Dataset":
         """Return a copy with white Gaussian noise added to every output of every split.
@@ -308,6 +352,7 @@ class Dataset:
             "inputs": [c.to_json() for c in self.inputs],
             "outputs": [c.to_json() for c in self.outputs],
             "source": self.source,
+            **({} if self.init_window is None else {"init_window": self.init_window}),
             "splits": {
                 name: {"n_traj": tr.n_traj, "lengths": tr.lengths.tolist()}
                 for name, tr in self.splits.items()
@@ -317,6 +362,9 @@ class Dataset:
     def summary(self) -> str:
         """A few human-readable lines: sample time, channels with ranges, split sizes."""
         lines = [f"Ts = {self.Ts:g} s"]
+        if self.init_window is not None:
+            lines.append(f"init window: the first {self.init_window} samples of a test trajectory initialise the "
+                         "model's state before scoring")
         ref = self.splits.get("train") or next(iter(self.splits.values()))
         u_all, y_all = np.concatenate(ref.u), np.concatenate(ref.y)
         for kind, chans, data in (("input ", self.inputs, u_all), ("output", self.outputs, y_all)):

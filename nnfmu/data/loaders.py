@@ -2,20 +2,20 @@
 
 - :func:`load_robot_benchmark`: the industrial robot benchmark's official
   ``.mat`` (Weigand et al. 2022), and the re-cut variant with 605-sample pieces;
-- :func:`load_csv`: CSV files with a header of named columns.
+- :func:`load_csv`: CSV files with a header of named columns (a thin front of
+  :func:`nnfmu.data.importing.load_files`, which also reads ``.mat`` and ``.npz``).
 """
 
 from __future__ import annotations
 
-import csv
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from nnfmu.data.dataset import Channel, Dataset, Trajectories, make_trajectories
-from nnfmu.errors import DataError, DataFileError, ShapeError
+from nnfmu.errors import DataFileError, ShapeError
 
 ROBOT_TS = 0.1
 ROBOT_INPUTS = tuple(Channel(f"tau{j}", "N.m", f"motor torque of joint {j}") for j in range(1, 7))
@@ -134,67 +134,33 @@ def _recut(path: Path, arr: dict, piece: int) -> Dataset:
 
 
 def load_csv(
-    files: dict[str, Sequence[str | os.PathLike] | str | os.PathLike],
+    files,
     *,
-    inputs: Sequence[str],
-    outputs: Sequence[str],
+    inputs,
+    outputs,
     Ts: float | None = None,
-    time_column: str | None = None,
-    units: dict[str, str] | None = None,
+    time_column: str | int | None = None,
+    units: Mapping[str, str] | Sequence[str] | None = None,
+    columns: Mapping | None = None,
+    **options,
 ) -> Dataset:
-    """Build a dataset from CSV files with a header row of column names.
+    """Build a dataset from CSV files, each one trajectory, with a header row of column names (or none).
 
-    ``files`` maps a split name (``train``, ``valid``, ``test``) to one CSV file
-    or a list of them; each file is one trajectory. ``inputs`` and ``outputs``
-    name the columns to use, in order. The sample time is ``Ts`` or, if a
-    ``time_column`` is given, the median step of that column (all files must
-    agree within 1e-6 relative). ``units`` maps column names to units.
+    ``files`` maps a split name (``train``, ``valid``, ``test``) to one CSV file or a list of
+    them; a single path or list holds the training files. ``inputs`` and ``outputs`` name the
+    columns to use, in order (names, 0-based indices, or ``{channel name: column}``). The sample
+    time is ``Ts`` or the median step of ``time_column``. ``units`` maps channel names to units.
+    ``columns`` gives splits their own columns of the same files, for a file like
+    ``uEst, uVal, yEst, yVal``::
+
+        load_csv("data.csv", inputs={"u": "uEst"}, outputs={"y": "yEst"}, Ts=4.0,
+                 columns={"test": {"u": "uVal", "y": "yVal"}})
+
+    A test split is required, and a split that would read the training columns of the training
+    files is refused (it would silently score on the training data). ``options`` are those of
+    :func:`nnfmu.data.importing.load_files` (``resample``, ``valid_fraction``, ``valid_trajectories``, ``seed``).
     """
-    units = units or {}
-    splits, steps = {}, []
-    for split, group in files.items():
-        group = [group] if isinstance(group, (str, os.PathLike)) else list(group)
-        us, ys = [], []
-        for file in group:
-            cols = _read_csv_columns(Path(file), list(inputs) + list(outputs) + ([time_column] if time_column else []))
-            us.append(np.column_stack([cols[c] for c in inputs]))
-            ys.append(np.column_stack([cols[c] for c in outputs]))
-            if time_column:
-                steps.append(float(np.median(np.diff(cols[time_column]))))
-        splits[split] = make_trajectories(us, ys, split)
-    if Ts is None:
-        if not steps:
-            raise DataError("give Ts (the sample time in s) or a time_column to read it from")
-        Ts = steps[0]
-        if not np.allclose(steps, Ts, rtol=1e-6):
-            raise DataError(f"CSV files have different sample times {sorted(set(steps))}; resample them first")
-    ins = [Channel(c, units.get(c, "")) for c in inputs]
-    outs = [Channel(c, units.get(c, "")) for c in outputs]
-    source = {"kind": "csv", "files": {k: [str(f) for f in ([v] if isinstance(v, (str, os.PathLike)) else v)]
-                                       for k, v in files.items()}}
-    return Dataset(Ts=float(Ts), inputs=tuple(ins), outputs=tuple(outs), splits=splits, source=source)
+    from nnfmu.data.importing import load_files
 
-
-def _read_csv_columns(file: Path, wanted: list[str]) -> dict[str, np.ndarray]:
-    if not file.is_file():
-        raise DataFileError(f"CSV file {file} not found")
-    with open(file, newline="") as f:
-        reader = csv.reader(f)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise DataFileError(f"{file} is empty; expected a header row of column names") from None
-        missing = [c for c in wanted if c not in header]
-        if missing:
-            raise DataError(f"{file} has no column(s) {missing}; its columns are {header}")
-        idx = [header.index(c) for c in wanted]
-        rows = []
-        for lineno, row in enumerate(reader, start=2):
-            if not row:
-                continue
-            try:
-                rows.append([float(row[i]) for i in idx])
-            except (ValueError, IndexError) as exc:
-                raise DataError(f"{file}, line {lineno}: cannot read a number ({exc})") from exc
-    data = np.array(rows, dtype=np.float64).reshape(-1, len(wanted))
-    return {c: data[:, k] for k, c in enumerate(wanted)}
+    return load_files(files, inputs=inputs, outputs=outputs, Ts=Ts, time_column=time_column, units=units,
+                      columns=columns, fmt="csv", **options)

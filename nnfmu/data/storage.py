@@ -1,6 +1,6 @@
-"""The dataset folder on disk (DESIGN.md, "Dataset on disk").
+"""The dataset folder on disk (docs/design.md, "Dataset on disk").
 
-    DIR/meta.json    Ts, inputs and outputs ({name, unit}), source, split lengths
+    DIR/meta.json    Ts, inputs and outputs ({name, unit}), source, split lengths, init_window (optional)
     DIR/train.npz    u (n_traj, n_steps, n_u), y (n_traj, n_steps, n_y), lengths (n_traj,)
     DIR/valid.npz    optional, same layout
     DIR/test.npz     same layout
@@ -33,9 +33,15 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
     """Write ``ds`` as a dataset folder at ``path`` and return the path.
 
     An existing folder is replaced only with ``overwrite=True``; the old one
-    stays intact until the new one is complete.
+    stays intact until the new one is complete. A dataset without a ``test``
+    split is refused (:class:`DataError`): every model is scored on it.
     """
     path = Path(path)
+    if "test" not in ds.splits:
+        raise DataError(f"the dataset has no 'test' split (it has {', '.join(ds.splits)}), so nothing could be "
+                        f"scored on {path}; add held-out test data: from_arrays(u_test=..., y_test=...), "
+                        "load_csv(..., columns={'test': [...]}) or files={'test': ...}, or "
+                        "ds.replace(splits={**ds.splits, 'test': ...})")
     if path.exists() and not overwrite:
         raise DataFileError(
             f"{path} already exists; choose another folder or pass overwrite=True (CLI: --force)"
@@ -105,7 +111,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         raise DataFileError(f"{path} holds no split; expected train.npz and test.npz beside meta.json")
     try:
         return Dataset(Ts=meta["Ts"], inputs=meta["inputs"], outputs=meta["outputs"],
-                       splits=splits, source=meta.get("source", {}))
+                       splits=splits, source=meta.get("source", {}), init_window=meta.get("init_window"))
     except (DataError, ShapeError) as exc:
         raise type(exc)(f"{path}: {exc}") from exc
 

@@ -1,4 +1,4 @@
-"""``StepModel``: the one step interface every network implements (DESIGN.md, "The one idea").
+"""``StepModel``: the one step interface every network implements (docs/design.md, "The one idea").
 
 Every network is a discrete-time step in physical units::
 

@@ -231,7 +231,7 @@ def generate_arm(*, size: str = "small", seed: int = 0, progress: bool = False,
                                                 "params": params_to_json(params)})
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from nnfmu.progress import tqdm
         bar = tqdm(total=cfg.n_train + cfg.n_test, desc="arm trajectories", unit="traj")
     try:
         train = _split(integ, cfg, cfg.n_train, cfg.train_segments, seed, 0, bar, partial)

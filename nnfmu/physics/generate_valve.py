@@ -154,7 +154,7 @@ def generate_valve(*, size: str = "small", seed: int = 0, progress: bool = False
     sim = _Simulator(params, n_sub)
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from nnfmu.progress import tqdm
         bar = tqdm(total=cfg.n_train + cfg.n_test, desc="valve trajectories", unit="traj")
     try:
         train = _split(sim, cfg, cfg.n_train, cfg.train_steps, seed, 0, bar)

@@ -194,6 +194,7 @@ class Study:
             from nnfmu.study.tune import require_ray
 
             require_ray()  # a missing extra is said before any work, not after the data are made
+        steps.check_source(self.system, self.source, self.data_dir)  # bad --data: say so and leave the folder alone
         self.check_manifest()
         from nnfmu.models.base import torch_threads
 

@@ -24,6 +24,7 @@ from nnfmu.errors import (
     TrainingError,
 )
 from nnfmu.study.budgets import Budget, Hyper
+from nnfmu.study.data_check import check_study_data
 from nnfmu.atomic import write_atomic, write_text_atomic
 
 
@@ -53,23 +54,32 @@ def trim(ds: Dataset, budget: Budget, seed: int) -> Dataset:
     return trimmed.with_validation(budget.valid_fraction, seed=seed)
 
 
+def check_source(system: str, source: Path | None, data_dir: Path) -> None:
+    """Before a study touches its folder: the robot needs data, and given data must load and be of ``system``.
+
+    Data already prepared in ``data_dir`` are not read again (the source may have moved since).
+    """
+    if source is None:
+        if system == "robot":
+            raise ConfigError("the robot study needs measured data: pass --data with the benchmark's .mat file "
+                              "or a dataset folder")
+        return
+    if not (data_dir / "meta.json").exists():
+        check_study_data(system, load_source(source), str(source))
+
+
 def prepare_data(system: str, budget: Budget, seed: int, source: Path | None, out: Path,
                  progress: bool) -> str:
     """Generate (valve, arm, slider) or load (``source``) the data, trim it to the budget and save it at ``out``."""
     if source is not None:
         ds = load_source(source)
-    elif system == "robot":
-        raise ConfigError("the robot study needs measured data: pass --data with the benchmark's .mat file "
-                          "or a dataset folder")
+        check_study_data(system, ds, str(source))
     else:
         from nnfmu.physics import generate_dataset
 
         ds = generate_dataset(system, size=budget.data_size, seed=seed, progress=progress)
         if budget.noise:
             ds = ds.with_measurement_noise(budget.noise, seed)
-    if "test" not in ds.splits:
-        raise DataError(f"the data have no 'test' split (splits: {', '.join(ds.splits)}); the study scores every "
-                        "model on the test split: add test.npz to the dataset folder")
     ds = trim(ds, budget, seed)
     save_dataset(ds, out, overwrite=True)
     tr, va, te = ds.train, ds.valid, ds.test

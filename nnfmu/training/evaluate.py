@@ -1,4 +1,4 @@
-"""Free-run evaluation: every score of a network is its free-run simulation (DESIGN.md)."""
+"""Free-run evaluation: every score of a network is its free-run simulation (docs/design.md)."""
 
 from __future__ import annotations
 

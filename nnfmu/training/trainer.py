@@ -26,7 +26,6 @@ from typing import Callable, Mapping
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from nnfmu.data import Dataset
 from nnfmu.errors import CheckpointError, ConfigError
@@ -35,6 +34,7 @@ from nnfmu.models.base import StepModel
 from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.registry import build_model
+from nnfmu.progress import advance, training_bar
 from nnfmu.training.batches import normalised_sequences
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
@@ -254,8 +254,8 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
     if session.epoch == 0 and not session.history:
         session.record(None, session.validate(), 0.0, False)
         session.save()
-    bar = tqdm(total=cfg.epochs, initial=min(session.epoch, cfg.epochs), disable=not progress,
-               unit="epoch", desc=f"{session.model.config.arch} {cfg.strategy}", dynamic_ncols=True)
+    bar = training_bar(session.epoch, cfg.epochs, cfg.max_minutes, progress=progress,
+                       desc=f"{session.model.config.arch} {cfg.strategy}")
     with StopRequests() as stop, bar:
         _show(bar, session.history[-1])
         while session.epoch < cfg.epochs and not session.patience_exhausted():
@@ -267,7 +267,7 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
             entry = session.record(loss, session.validate(), time.monotonic() - t0, early)
             session.save()
             _show(bar, entry)
-            bar.update(1)
+            advance(bar, session.epoch)
             if callback is not None:
                 try:
                     callback(session.epoch, dict(entry))

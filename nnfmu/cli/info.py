@@ -1,0 +1,155 @@
+"""``nnfmu info FILE.fmu|FILE.pt|DATASET [--json]``: what a file or dataset folder is.
+
+An FMU: its model, FMI version, platforms, Ts, inputs, outputs and parameters
+with units and ranges, and who generated it. A checkpoint: the network, the
+data it was trained on (channels, Ts, provenance), the training settings and
+how it ended. A dataset folder: Ts, channels with units and ranges, splits,
+init window and provenance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("info", help="describe an FMU, a checkpoint or a dataset folder",
+                       description="Describe an FMU (.fmu), a training checkpoint (.pt) or a dataset folder: inputs, "
+                                   "outputs, units, Ts, ranges, provenance and the training summary.")
+    p.add_argument("path", help="an .fmu file, a .pt checkpoint or a dataset folder")
+    p.add_argument("--json", action="store_true", help="print the description as JSON")
+    p.set_defaults(func=_run)
+
+
+def describe(path: str | Path) -> dict:
+    """A JSON-ready description of an FMU, a checkpoint or a dataset folder (chosen by what ``path`` is)."""
+    from nnfmu.errors import DataFileError
+
+    path = Path(path)
+    if path.is_dir():
+        return _dataset(path)
+    if path.suffix.lower() == ".fmu":
+        return _fmu(path)
+    if path.suffix.lower() in (".pt", ".pth"):
+        return _checkpoint(path)
+    if not path.exists():
+        raise DataFileError(f"{path} not found; give an .fmu file, a .pt checkpoint or a dataset folder")
+    raise DataFileError(f"{path} is neither an .fmu, a .pt checkpoint nor a dataset folder")
+
+
+def _range(values) -> list[float]:
+    return [float(min(values)), float(max(values))]
+
+
+def _dataset(path: Path) -> dict:
+    import numpy as np
+
+    from nnfmu.data import load_dataset
+
+    ds = load_dataset(path)
+    u = np.concatenate([a for tr in ds.splits.values() for a in tr.u])
+    y = np.concatenate([a for tr in ds.splits.values() for a in tr.y])
+    channels = lambda chans, data: [{**c.to_json(), "range": _range(data[:, j])} for j, c in enumerate(chans)]
+    return {"kind": "dataset", "path": str(path), "Ts": ds.Ts, "inputs": channels(ds.inputs, u),
+            "outputs": channels(ds.outputs, y), "init_window": ds.init_window,
+            "splits": {k: {"n_traj": v.n_traj, "n_samples": v.n_samples, "lengths": sorted(set(v.lengths.tolist()))}
+                       for k, v in ds.splits.items()},
+            "source": ds.source}
+
+
+def _fmu(path: Path) -> dict:
+    import fmpy
+
+    from nnfmu.cosim import inspect_fmu
+
+    inspect_fmu(path)  # a clear error for a missing or broken file
+    md = fmpy.read_model_description(str(path), validate=False)
+
+    def variable(v) -> dict:
+        unit = v.unit or (v.declaredType.unit if getattr(v, "declaredType", None) is not None else None)
+        out = {"name": v.name, "unit": unit or "", "description": v.description or ""}
+        for key in ("start", "min", "max"):
+            value = getattr(v, key, None)
+            if value not in (None, ""):
+                out[key] = float(value) if _is_number(value) else value
+        return out
+
+    by = {c: [variable(v) for v in md.modelVariables if v.causality == c] for c in ("input", "output", "parameter")}
+    step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
+    return {"kind": "fmu", "path": str(path), "model": md.modelName, "fmi_version": md.fmiVersion,
+            "interfaces": [k for k, v in (("co-simulation", md.coSimulation), ("model exchange", md.modelExchange))
+                           if v is not None],
+            "platforms": fmpy.supported_platforms(str(path)), "Ts": None if step is None else float(step),
+            "inputs": by["input"], "outputs": by["output"], "parameters": by["parameter"],
+            "description": md.description, "generation_tool": md.generationTool,
+            "generated": md.generationDateAndTime}
+
+
+def _is_number(value) -> bool:
+    try:
+        float(value)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _checkpoint(path: Path) -> dict:
+    from nnfmu.models import load_checkpoint
+
+    ckpt = load_checkpoint(path)
+    meta, state = ckpt["meta"], ckpt["state_dict"]
+    stats = lambda kind, chans: [{**c, "mean": float(state[f"{kind}_mean"][j]), "std": float(state[f"{kind}_std"][j])}
+                                 if f"{kind}_mean" in state else dict(c) for j, c in enumerate(chans)]
+    history = ckpt.get("history") or []
+    summary = dict(ckpt.get("summary") or {})
+    summary.update(best_epoch=ckpt.get("best_epoch"), seconds=float(sum(h.get("seconds", 0.0) for h in history)),
+                   resumable=ckpt.get("resume") is not None)
+    return {"kind": "checkpoint", "path": str(path), "name": meta.get("name"), "Ts": meta.get("Ts"),
+            "model_config": ckpt["model_config"], "train_config": ckpt.get("train_config"),
+            "inputs": stats("u", meta.get("inputs", [])), "outputs": stats("y", meta.get("outputs", [])),
+            "training": summary, "source": meta.get("source", {})}
+
+
+def render(doc: dict) -> str:
+    """The description as a few readable lines."""
+    lines = [f"{doc['path']}: {doc['kind']}"]
+    head = {"dataset": ("Ts",), "fmu": ("model", "description", "fmi_version", "interfaces", "platforms", "Ts",
+                                        "generation_tool", "generated"), "checkpoint": ("name", "Ts")}[doc["kind"]]
+    lines += [f"  {key}: {_text(doc[key])}" for key in head if doc.get(key) not in (None, [], "")]
+    for role in ("inputs", "outputs", "parameters"):
+        if doc.get(role):
+            lines.append(f"  {role}:")
+            lines += [f"    {_channel(c)}" for c in doc[role]]
+    for key in ("init_window", "splits", "model_config", "train_config", "training", "source"):
+        if doc.get(key) not in (None, {}, []):
+            lines.append(f"  {key}: {_text(doc[key])}")
+    return "\n".join(lines)
+
+
+def _channel(c: dict) -> str:
+    text = f"{c['name']} [{c.get('unit') or '-'}]"
+    if "range" in c:
+        text += f"  range {c['range'][0]:.4g} .. {c['range'][1]:.4g}"
+    if "min" in c or "max" in c:
+        text += f"  min {c.get('min', '-')}, max {c.get('max', '-')}"
+    if "mean" in c:
+        text += f"  training data mean {c['mean']:.4g}, std {c['std']:.4g}"
+    if "start" in c:
+        text += f"  start {c['start']:.6g}" if isinstance(c["start"], float) else f"  start {c['start']}"
+    return text + (f"  ({c['description']})" if c.get("description") else "")
+
+
+def _text(value) -> str:
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return ", ".join(value)
+    if isinstance(value, (dict, list)):
+        return json.dumps(value, default=str)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _run(args: argparse.Namespace) -> int:
+    doc = describe(args.path)
+    print(json.dumps(doc, indent=2, default=str) if args.json else render(doc))
+    return 0

@@ -1,0 +1,40 @@
+"""`nnfmu train --max-minutes M` alone: train until the budget is spent, keep the best, show the time left."""
+
+import pytest
+
+from nnfmu.cli import main
+from nnfmu.cli.train import BUDGET_EPOCHS
+from nnfmu.data import Trajectories, save_dataset
+from nnfmu.models import load_checkpoint
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture(scope="module")
+def data_dir(valve_small, tmp_path_factory):
+    tr, te = valve_small.train, valve_small.test
+    splits = {"train": tr.subset(range(4)), "valid": tr.subset([4]),
+              "test": Trajectories((te.u[0][:300],), (te.y[0][:300],))}
+    return save_dataset(valve_small.replace(splits=splits), tmp_path_factory.mktemp("budget") / "valve")
+
+
+def test_max_minutes_alone_is_the_only_limit(data_dir, tmp_path, capsys):
+    out = tmp_path / "m.pt"
+    assert main(["train", "--data", str(data_dir), "--arch", "mlp", "--hidden", "4", "--truncate", "30",
+                 "--max-minutes", "0.03", "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    ckpt = load_checkpoint(out)
+    assert ckpt["train_config"]["epochs"] == BUDGET_EPOCHS and ckpt["train_config"]["patience"] == 0
+    assert ckpt["summary"]["stop_reason"] == "time-budget"
+    assert ckpt["best_epoch"] == min(range(len(ckpt["history"])), key=lambda e: ckpt["history"][e]["valid_nrmse"])
+    assert "stopped: time-budget" in captured.out
+    assert "left of 00:02 budget" in captured.err and "epoch 1 " in captured.err
+
+
+def test_max_minutes_with_epochs_keeps_both_limits(data_dir, tmp_path):
+    out = tmp_path / "m.pt"
+    assert main(["train", "--data", str(data_dir), "--arch", "mlp", "--hidden", "4", "--truncate", "30",
+                 "--max-minutes", "5", "--epochs", "2", "--quiet", "-o", str(out)]) == 0
+    ckpt = load_checkpoint(out)
+    assert ckpt["train_config"]["epochs"] == 2 and ckpt["train_config"]["patience"] == 15
+    assert ckpt["summary"]["stop_reason"] == "epochs"
