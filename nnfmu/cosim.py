@@ -11,7 +11,8 @@ with
 
 and the recorded outputs at ``t_0 .. t_{N-1}`` are handed to
 :func:`nnfmu.metrics.nrmse`. The FMU is unpacked and instantiated once and
-reset between trajectories.
+reset between trajectories. :func:`evaluate` also counts the samples whose
+inputs lie outside the FMU's declared valid range (``min``/``max``).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from nnfmu.data import Dataset
 from nnfmu.errors import DataError, DataFileError, SimulationError
 from nnfmu.metrics import NrmseResult
 from nnfmu.protocols import Protocol
+from nnfmu.valid_range import OutOfRange, count_outside
 from nnfmu.window_names import fmu_init_window, window_start_values
 
 _TS_RTOL = 1e-9
@@ -49,6 +51,7 @@ class FmuInfo:
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
     parameters: tuple[str, ...]
+    input_ranges: dict = field(default_factory=dict)  # input name -> (min, max), None where undeclared
     init_window: int = 1  # samples its init sees: 1 + its window parameters per channel (nnfmu.window_names)
 
 
@@ -70,9 +73,11 @@ def inspect_fmu(path: str | os.PathLike) -> FmuInfo:
     by_causality = {}
     for v in md.modelVariables:
         by_causality.setdefault(v.causality, []).append(v.name)
+    ranges = {v.name: tuple(None if b is None else float(b) for b in (v.min, v.max))
+              for v in md.modelVariables if v.causality == "input"}
     outputs = tuple(by_causality.get("output", []))
     return FmuInfo(path, md.modelName, md.fmiVersion, Ts, tuple(by_causality.get("input", [])), outputs,
-                   tuple(by_causality.get("parameter", [])), fmu_init_window(md, outputs))
+                   tuple(by_causality.get("parameter", [])), ranges, fmu_init_window(md, outputs))
 
 
 def check_compatible(info: FmuInfo, dataset: Dataset) -> None:
@@ -199,10 +204,14 @@ class Evaluation:
     path: Path
     result: NrmseResult
     predictions: list[np.ndarray] = field(repr=False)
+    out_of_range: OutOfRange | None = None  # test samples outside the FMU's valid input range
 
     def to_json(self, outputs: Sequence) -> dict:
         """Name, FMU path and the scores of :meth:`NrmseResult.to_json` (``outputs``: names or Channels)."""
-        return {"name": self.name, "fmu": str(self.path), **self.result.to_json(outputs)}
+        doc = {"name": self.name, "fmu": str(self.path), **self.result.to_json(outputs)}
+        if self.out_of_range is not None:
+            doc["inputs_out_of_range"] = self.out_of_range.to_json()
+        return doc
 
 
 def evaluate(paths: Sequence[str | os.PathLike], dataset: Dataset, split: str = "test",
@@ -217,11 +226,13 @@ def evaluate(paths: Sequence[str | os.PathLike], dataset: Dataset, split: str = 
     """
     paths = [Path(p) for p in paths]
     names = list(names) if names is not None else [p.stem for p in paths]
-    measured = dataset.split(split).y
-    for p in paths:
-        check_compatible(inspect_fmu(p), dataset)
+    measured, inputs = dataset.split(split).y, dataset.split(split).u
+    infos = [inspect_fmu(p) for p in paths]
+    for info in infos:
+        check_compatible(info, dataset)
     out = []
-    for name, p in zip(names, paths):
+    for name, p, info in zip(names, paths, infos):
         pred = simulate_split(p, dataset, split, progress=progress, protocol=protocol)
-        out.append(Evaluation(name, p, protocol.score(list(measured), pred), pred))
+        outside = count_outside(inputs, dataset.input_names, info.input_ranges)
+        out.append(Evaluation(name, p, protocol.score(list(measured), pred), pred, outside))
     return out

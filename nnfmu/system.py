@@ -44,17 +44,27 @@ class Variable:
     """A named scalar of an exported model: an input, output or parameter.
 
     ``name`` must be a C identifier; ``start`` is the default value of a
-    parameter (ignored for inputs and outputs).
+    parameter or an input (ignored for outputs). ``min`` and ``max`` bound the
+    valid values of an input, in its unit: the FMU declares them and warns
+    when an input leaves them (see docs/fmu.md). None: unbounded on that side.
     """
 
     name: str
     unit: str = ""
     description: str = ""
     start: float = 0.0
+    min: float | None = None
+    max: float | None = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():
             raise ShapeError(f"variable name {self.name!r} is not a C identifier; use letters, digits, '_'")
+        for bound in ("min", "max"):
+            value = getattr(self, bound)
+            if value is not None and not np.isfinite(value):
+                raise ShapeError(f"{bound} of variable {self.name!r} is {value!r}; give a finite bound or None")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ShapeError(f"variable {self.name!r} has min {self.min!r} > max {self.max!r}; swap them")
 
 
 def _as_variable(v) -> Variable:

@@ -29,3 +29,14 @@ def one_thread():
 
     with torch_threads(1):
         yield
+
+
+@pytest.fixture(scope="session")
+def smoke_study(tmp_path_factory):
+    """``nnfmu reproduce valve --budget smoke``, run once per session; returns (folder, result, printed lines)."""
+    from nnfmu.study import reproduce
+
+    out = tmp_path_factory.mktemp("study") / "valve-smoke"
+    lines: list[str] = []
+    result = reproduce("valve", out, budget="smoke", progress=False, echo=lines.append)
+    return out, result, lines

@@ -17,11 +17,13 @@ import casadi as ca
 import fmpy
 import numpy as np
 from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2True
+from fmpy.fmi3 import fmi3Boolean, fmi3Float64
 
 from nnfmu.export.fmu import BuildOptions, build_fmu
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 
-__all__ = ["FMICallException", "Instance", "MODELS", "built_fmu", "excitation", "fmpy_simulate", "unzipped"]
+__all__ = ["FMICallException", "Instance", "MODELS", "built_fmu", "excitation", "fmpy_simulate", "get_model", "unzipped"]
 
 
 def linear_model(damping: float = 0.95) -> CasadiModel:
@@ -58,7 +60,7 @@ def nonlinear_model() -> CasadiModel:
     y0, u0 = ca.MX.sym("y0", 2), ca.MX.sym("u0", 2)
     init = ca.Function("init", [y0, u0, p], [ca.vertcat(y0, ca.tanh(ca.mtimes(V, ca.vertcat(y0, u0)) * p[0]))],
                        ["y0", "u0", "p"], ["x0"])
-    spec = SystemSpec("tinynet", 0.002, [Variable("u1", "V"), Variable("u2", "V")],
+    spec = SystemSpec("tinynet", 0.002, [Variable("u1", "V", min=-3.0, max=3.0), Variable("u2", "V", min=-3.0, max=3.0)],
                       [Variable("s", "mm", "stroke"), Variable("q", "bar", "pressure", start=1.0)],
                       [Variable("gain", "", "input gain", start=1.0), Variable("scale", "", "output scale", start=0.2)])
     return CasadiModel(init, step, spec)
@@ -74,20 +76,50 @@ def blowup_model() -> CasadiModel:
     return CasadiModel(init, step, SystemSpec("blowup", 0.5, ["u"], [Variable("y", start=1.0)]))
 
 
+def valve_gru_model() -> CasadiModel:
+    """A tiny random GRU (hidden 3) with the valve's channels, Ts = 40 us and a stored input range [0, 10] V.
+
+    Exported as a trained network is (torch -> CasADi, with the normalisation inside), so its FMU is what
+    ``python -m nnfmu.export`` writes, at a fraction of the cost.
+    """
+    import torch
+
+    from nnfmu.export import casadi_model
+    from nnfmu.models import ModelConfig, build_model
+
+    meta = {"name": "valve_gru", "Ts": 4e-5, "input_range": [[0.0, 10.0], [0.0, 10.0]],
+            "inputs": [{"name": "u1", "unit": "V"}, {"name": "u2", "unit": "V"}],
+            "outputs": [{"name": "s", "unit": "m"}, {"name": "p", "unit": "Pa"}]}
+    torch.manual_seed(3)
+    net = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, hidden=3), meta).double()
+    with torch.no_grad():
+        net.u_mean.fill_(5.0), net.u_std.fill_(2.0)
+        net.y_mean.copy_(torch.tensor([5e-4, 3e5])), net.y_std.copy_(torch.tensor([2e-4, 1e5]))
+    return casadi_model(net.eval())
+
+
 MODELS = {"linear": linear_model(), "nonlinear": nonlinear_model(), "blowup": blowup_model(),
           "linear_twin": linear_model(damping=0.5)}  # same name and variables, other maths
+_LAZY_MODELS = {"valve_gru": valve_gru_model}  # built on first use (they need torch)
 _WORK = Path(tempfile.mkdtemp(prefix="nnfmu-test-fmus-"))
 atexit.register(shutil.rmtree, _WORK, ignore_errors=True)
 _BUILT: dict[tuple, Path] = {}
 _LOGGERS: list = []
 
 
+def get_model(name: str) -> CasadiModel:
+    """``MODELS[name]``, or one of the models built on first use (``valve_gru``)."""
+    if name not in MODELS:
+        MODELS[name] = _LAZY_MODELS[name]()
+    return MODELS[name]
+
+
 def built_fmu(name: str, fmi_version: int, options: BuildOptions | None = None) -> Path:
-    """The FMU of ``MODELS[name]``, built once per session for each (name, version, options)."""
+    """The FMU of ``get_model(name)``, built once per session for each (name, version, options)."""
     key = (name, fmi_version, options)
     if key not in _BUILT:
         path = _WORK / f"{name}_fmi{fmi_version}_{len(_BUILT)}.fmu"
-        _BUILT[key] = build_fmu(MODELS[name], path, fmi_version=fmi_version, options=options)
+        _BUILT[key] = build_fmu(get_model(name), path, fmi_version=fmi_version, options=options)
     return _BUILT[key]
 
 
@@ -161,9 +193,24 @@ class Instance:
         refs = [self.vr[k] for k in names]
         return np.array((self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)(refs))
 
-    def step(self, h: float, t: float | None = None) -> None:
-        self.fmu.doStep(self.time if t is None else t, h)
-        self.time += h
+    def step(self, h: float, t: float | None = None) -> int:
+        """doStep(t, h) (t: where the last step ended); returns the status (OK 0, Warning 1), raises on errors."""
+        t = self.time if t is None else t
+        if self.fmi3:
+            flags = [fmi3Boolean() for _ in range(3)] + [fmi3Float64()]
+            status = self.fmu.fmi3DoStep(self.fmu.component, t, h, fmi3Boolean(True), *map(ctypes.byref, flags))
+        else:
+            status = self.fmu.fmi2DoStep(self.fmu.component, t, h, fmi2True)
+        self.time = t + h
+        return status
+
+    def set_int(self, name: str, value: int) -> None:
+        """Set the Integer (FMI 3: Int32) or Boolean parameter ``name``."""
+        ref, boolean = [self.vr[name]], name == "input_range_error"
+        if self.fmi3:
+            (self.fmu.setBoolean if boolean else self.fmu.setInt32)(ref, [bool(value) if boolean else int(value)])
+        else:
+            (self.fmu.setBoolean if boolean else self.fmu.setInteger)(ref, [bool(value) if boolean else int(value)])
 
     def run(self, model: CasadiModel, u: np.ndarray) -> np.ndarray:
         """Set u[k] and step Ts for each row; return the outputs after each step (n, n_y)."""
@@ -201,6 +248,9 @@ class Instance:
 
     def errors(self) -> list[str]:
         return [m for s, m in self.logs if s >= 3]
+
+    def warnings(self) -> list[str]:
+        return [m for s, m in self.logs if s == 1]
 
     def close(self) -> None:
         self.fmu.freeInstance()  # fmpy also unloads the library here (one dlclose per load)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fmpy
 import numpy as np
 import pytest
 import torch
@@ -11,6 +12,7 @@ from fmu_cases import fmpy_simulate
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.export.__main__ import main as export_main
 from nnfmu.models import ModelConfig, build_model, load_model, save_checkpoint
+from nnfmu.physics.arm import ARM_TAU_LIMITS_NM
 
 VALVE_META = {"name": "valve_net", "Ts": 4e-5,
               "inputs": [{"name": "u1", "unit": "V"}, {"name": "u2", "unit": "V"}],
@@ -30,6 +32,9 @@ def test_physics_fmu_validates_and_equals_the_casadi_simulation(tmp_path, capsys
     assert f"wrote {out} (FMI {version}.0 co-simulation" in capsys.readouterr().out
     assert validate_fmu(str(out)) == []
     model = physics_system(system).model()
+    limits = {"valve": [(0.0, 250.0)] * 2, "arm": list(ARM_TAU_LIMITS_NM)}[system]  # the physical limits
+    md = fmpy.read_model_description(str(out))
+    assert [(float(v.min), float(v.max)) for v in md.modelVariables if v.causality == "input"] == limits
     t = np.arange(n)[:, None] * model.spec.Ts
     scale = {"valve": (2.5, 2.0), "arm": (0.0, 30.0)}[system]
     u = scale[0] + scale[1] * np.sin(2 * np.pi * t * np.linspace(1, 2, model.spec.n_u) / (n * model.spec.Ts) * 3)
@@ -67,6 +72,8 @@ def test_exported_checkpoint_equals_the_torch_model(tmp_path, capsys, checkpoint
     out = tmp_path / f"{arch}.fmu"
     assert export_main([str(checkpoints[arch]), "-o", str(out), "--fmi-version", str(version)]) == 0
     assert validate_fmu(str(out)) == []
+    inputs = [v for v in fmpy.read_model_description(str(out)).modelVariables if v.causality == "input"]
+    assert [(float(v.min), float(v.max)) for v in inputs] == [(-3.5, 8.5)] * 2  # no stored range: 2.5 +- 4 x 1.5
     network = load_model(checkpoints[arch])
     from nnfmu.export import casadi_model
 
@@ -79,8 +86,6 @@ def test_exported_checkpoint_equals_the_torch_model(tmp_path, capsys, checkpoint
 
 
 def test_export_name_option_sets_the_model_identifier(tmp_path, capsys, checkpoints):
-    import fmpy
-
     out = tmp_path / "renamed.fmu"
     assert export_main([str(checkpoints["gru"]), "-o", str(out), "--name", "ValveGRU"]) == 0
     assert fmpy.read_model_description(str(out)).coSimulation.modelIdentifier == "ValveGRU"

@@ -20,15 +20,6 @@ from nnfmu.training import STRATEGIES
 N_CELLS = 1 + 2 * 10 + 3 + 12 + 1  # data, train+export x 10, linear (2) + physics, 12 scores, report
 
 
-@pytest.fixture(scope="session")
-def smoke_study(tmp_path_factory):
-    """``nnfmu reproduce valve --budget smoke``, run once per session; returns (folder, result, printed lines)."""
-    out = tmp_path_factory.mktemp("study") / "valve-smoke"
-    lines: list[str] = []
-    result = reproduce("valve", out, budget="smoke", progress=False, echo=lines.append)
-    return out, result, lines
-
-
 @pytest.fixture
 def study_copy(smoke_study, tmp_path):
     """A private copy of the smoke study to damage; the session's stays intact."""

@@ -82,6 +82,9 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{args.split} split of {args.data}: {ds.split(args.split).n_traj} trajectories, {protocol.describe()}; "
           "fit % = 100 (1 - NRMSE)")
     print(format_table(evaluations, ds.outputs))
+    for ev in evaluations:  # the FMU warns on these samples: its outputs there are extrapolated
+        if ev.out_of_range is not None:
+            print(f"inputs outside the valid range of {ev.name}: {ev.out_of_range.describe()}")
     out = Path(args.out) if args.out else None
     json_path = args.json or (out / "scores.json" if out else None)
     if json_path:

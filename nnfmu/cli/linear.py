@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="residual evaluations allowed to the refinement (default 100)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
     p.add_argument("--save", metavar="FILE", help="also (or only) write A, B, C, D and offsets as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bars (orders tried, refinement cost)")
     p.add_argument("--name", default="linear", help="the FMU's model name (a C identifier; default 'linear')")
     add_fmu_options(p)
     p.set_defaults(func=_run)
@@ -59,6 +60,7 @@ def _summary(model, dataset) -> list[str]:
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_LINEAR_ORDER, check_at_most
     from nnfmu.linear import LinearConfig, identify_linear
 
     if not args.out and not args.save:
@@ -66,16 +68,18 @@ def _run(args: argparse.Namespace) -> int:
                           "or both")
     if not args.name.isidentifier():
         raise ConfigError(f"--name must be a C identifier (letters, digits, '_'), got {args.name!r}")
+    for option, value in (("--order", args.order), ("--max-order", args.max_order)):
+        check_at_most(option, value, MAX_LINEAR_ORDER, "MAX_LINEAR_ORDER")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           refine=not args.no_refine, refine_x0=args.refine_x0,
                           max_evaluations=args.max_evaluations)
     dataset = load_dataset(args.data)
-    model = identify_linear(dataset, config)
+    model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
-    if args.save:
-        print(f"wrote {model.save(args.save)}")
-    if args.out:
+    if args.out:  # first: a failing -o then leaves no file at all
         from nnfmu.cli.export import write_fmu
 
         write_fmu(model.casadi_model(name=args.name), Path(args.out), args)
+    if args.save:
+        print(f"wrote {model.save(args.save)}")
     return 0

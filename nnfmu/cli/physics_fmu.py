@@ -41,9 +41,11 @@ def physics_system(name: str):
 
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_RK4_SUBSTEPS, check_at_most
 
     if args.n_sub is not None and args.n_sub < 1:
         raise ConfigError(f"--n-sub must be a positive number of RK4 sub-steps, got {args.n_sub}")
+    check_at_most("--n-sub", args.n_sub, MAX_RK4_SUBSTEPS, "MAX_RK4_SUBSTEPS")
     model = physics_system(args.system).model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
     write_fmu(model, Path(args.out or f"{args.system}.fmu"), args)
     return 0

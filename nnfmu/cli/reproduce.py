@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 
+from nnfmu.cli._resources import add_resource_options
+
 _DESCRIPTION = (
     "Reproduce the paper's study (parallel vs series-parallel training of MLP, RNN, LSTM, GRU and TCN) on the "
     "valve, the arm or the slider (generated data) or the industrial robot (measured data, --data). Every "
@@ -33,9 +35,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tune", action=argparse.BooleanOptionalAction, default=None,
                    help="grid-search the hyperparameters per architecture and strategy on Ray Tune "
                         "(default: on for --budget paper, off otherwise; needs the extra 'tune')")
-    p.add_argument("--address", help="Ray cluster address for --tune (default: a local Ray instance)")
+    p.add_argument("--address", help="a running Ray cluster: the cells run there as Ray tasks, resumable, and the "
+                                     "results are written to --out here (default: this machine)")
+    p.add_argument("--jobs", type=int, default=1, help="cells run at once in local processes (default 1); with "
+                                                       "--address, Ray tasks at once (default: the cluster's CPUs)")
     p.add_argument("--seed", type=int, default=0, help="seeds the data, the validation split and training (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bars (one line per cell is still printed)")
+    add_resource_options(p)
     p.set_defaults(func=_run)
 
 
@@ -43,7 +49,8 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.study import reproduce
 
     result = reproduce(args.system, args.out, budget=args.budget, data=args.data, tune=args.tune, seed=args.seed,
-                       address=args.address, progress=not args.quiet)
+                       address=args.address, progress=not args.quiet, jobs=args.jobs, device=args.device,
+                       threads=args.threads)
     table = result.results_md.read_text().split("## NRMSE per output")[0]  # title, Table I and its legend
     print(f"\n{table.rstrip()}\n")
     print(f"ran {len(result.log.ran)} cells, skipped {len(result.log.skipped)} done before; results in "

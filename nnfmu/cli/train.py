@@ -3,16 +3,21 @@
 Trains one network with the one trainer, shows a progress bar with the loss
 and the validation free-run NRMSE, writes the checkpoint after every epoch,
 and prints the free-run test NRMSE of the best weights. Ctrl-C (or SIGTERM)
-stops and keeps the best checkpoint; ``--resume`` continues it.
+stops and keeps the best checkpoint (exit status 130, or 143 for SIGTERM);
+``--resume`` continues it. A run that fails or stops before its first epoch
+finishes leaves nothing at ``--out``; sizes are checked against
+:mod:`nnfmu.limits` before anything is allocated.
 
 ``--arch hybrid --physics valve|arm [--physics-params FILE.json] [--train-physics NAME,...]``
 trains a physics model plus a neural correction (:mod:`nnfmu.hybrid`): parallel strategy only,
-in float64, on one CPU thread; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
+in float64; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
 """
 
 from __future__ import annotations
 
 import argparse
+
+from nnfmu.cli._resources import add_resource_options, check_resource_options
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -114,6 +119,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_resource_options(p)
     p.set_defaults(func=_run)
 
 
@@ -198,14 +204,18 @@ def _differs(config, key: str, value) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import signal
     from pathlib import Path
 
+    from nnfmu.cli._outputs import remove_if_untrained
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
     from nnfmu.models import load_checkpoint
     from nnfmu.training import train
 
     out = Path(args.out)
+    device = check_resource_options(args)
     ds = load_dataset(args.data)
     stored = load_checkpoint(out) if args.resume else None
     if stored is None and out.exists() and not args.force:
@@ -213,20 +223,30 @@ def _run(args: argparse.Namespace) -> int:
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
     hybrid = model_config.arch == "hybrid"
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
-    if hybrid:  # hundreds of tiny operations per step: more intra-op threads only add contention
-        import torch
-
-        torch.set_num_threads(1)
+    check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
+    check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
     if args.seeds is not None:
-        return _run_seeds(args, ds, model_config, train_config, out)
-    result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet)
+        return _run_seeds(args, ds, model_config, train_config, out, device)
+    try:
+        result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
+                       device=device, threads=args.threads)
+    except BaseException:
+        if not args.resume:  # a failed command leaves nothing at --out unless an epoch finished
+            remove_if_untrained(out)
+        raise
     for note in result.notes:
         print(f"note: {note}")
+    if result.stop_reason in ("SIGINT", "SIGTERM"):
+        status = 128 + getattr(signal, result.stop_reason)
+        if not args.resume and remove_if_untrained(out):
+            print(f"interrupted before the first epoch finished: nothing was kept at {out}")
+            return status
+        print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, validation free-run NRMSE "
+              f"{result.best_valid_nrmse:.4f}; checkpoint {out}")
+        print(f"interrupted: the best checkpoint so far is kept; continue with --resume --out {out}")
+        return status
     print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, "
           f"validation free-run NRMSE {result.best_valid_nrmse:.4f}; checkpoint {out}")
-    if result.stop_reason in ("SIGINT", "SIGTERM"):
-        print(f"interrupted: the best checkpoint so far is kept; continue with --resume --out {out}")
-        return 130
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
@@ -242,7 +262,7 @@ def _print_test(ds, test, test_window, n: int) -> None:
               f"scored from sample {n})")
 
 
-def _run_seeds(args: argparse.Namespace, ds, model_config, train_config, out) -> int:
+def _run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
     from nnfmu.training import train_seeds
 
     if args.resume:
@@ -251,7 +271,7 @@ def _run_seeds(args: argparse.Namespace, ds, model_config, train_config, out) ->
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
     result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
-                         progress=not args.quiet and args.jobs == 1)
+                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads)
     for note in result.notes:
         print(f"note: {note}")
     for r in result.seeds:

@@ -1,7 +1,9 @@
-"""``nnfmu tune --data DIR --arch A [--strategy S] [--address ADDR] [--samples N] [--max-minutes M] [--out best.json]``.
+"""``nnfmu tune --data DIR --arch A [--strategy S] [--address ADDR] [--search grid|optuna|hyperopt] [--scheduler asha]``.
 
-Grid search of one architecture's hyperparameters on Ray Tune (the optional
-extra ``tune``), as the paper did. The base configuration and the grid come
+Search of one architecture's hyperparameters on Ray Tune (the optional
+extra ``tune``): the paper's grid search, or Optuna's or HyperOpt's search
+algorithm among the grid's values (extra ``search``), with an optional ASHA
+scheduler that stops trailing trials early, and CPUs and GPUs per trial. The base configuration and the grid come
 from the budget table of the dataset's system (:mod:`nnfmu.study.budgets`);
 ``--grid`` replaces the grid. Prints the trials, writes the best
 hyperparameters as JSON and the ``nnfmu train`` line that uses them.
@@ -43,6 +45,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="folder for Ray's trial records (default ~/ray_results; on a cluster, a shared one)")
     p.add_argument("-o", "--out", default="best.json",
                    help="where to write the best hyperparameters (default best.json)")
+    p.add_argument("--search", choices=["grid", "optuna", "hyperopt"], default="grid",
+                   help="every grid point (default), or a search algorithm choosing among the grid's values "
+                        "(extra 'search': pip install \"nnfmu[search]\")")
+    p.add_argument("--trials", type=int, help="trials of --search optuna|hyperopt (default: the grid's size)")
+    p.add_argument("--scheduler", choices=["fifo", "asha"], default="fifo",
+                   help="fifo: every trial runs to its end (default); asha: stop trailing trials early")
+    p.add_argument("--grace-epochs", type=int, default=1, help="asha: epochs before a trial may be stopped (default 1)")
+    p.add_argument("--cpus-per-trial", type=float, default=1.0,
+                   help="CPUs Ray reserves for each trial, used as its torch threads (default 1)")
+    p.add_argument("--gpus-per-trial", type=float, default=None,
+                   help="GPUs for each trial, a fraction shares one (default: 1 with --device cuda, else 0)")
+    p.add_argument("--device", default="auto", metavar="auto|cpu|cuda",
+                   help="where the trials train: auto (a GPU when this machine has one; default), cpu or cuda")
     p.set_defaults(func=_run)
 
 
@@ -88,17 +103,25 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.study import TuneSettings, get_budget, require_ray, tune_architecture
 
     require_ray()  # before loading data: a missing extra is the first thing to say
+    gpus = args.gpus_per_trial
+    if gpus is None:
+        from nnfmu.training.resources import resolve_device
+
+        gpus = 1.0 if resolve_device(args.device).type == "cuda" else 0.0
     ds = load_dataset(args.data)
     budget = get_budget(_system(args, ds), args.budget)
     grid = parse_grid(args.grid) if args.grid else budget.grid(args.arch)
     settings = TuneSettings(epochs=args.epochs or budget.tune_epochs,
                             patience=budget.tune_patience if args.patience is None else args.patience,
                             max_minutes=args.max_minutes or budget.tune_max_minutes, samples=args.samples,
-                            seed=args.seed)
+                            seed=args.seed, search=args.search, trials=args.trials, scheduler=args.scheduler,
+                            grace_epochs=args.grace_epochs, cpus_per_trial=args.cpus_per_trial,
+                            gpus_per_trial=gpus)
     result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
                                settings=settings, address=args.address, num_cpus=args.cpus, storage=args.storage,
                                progress=True)
-    print(f"\n{len(result.trials)} trials of {args.arch} ({args.strategy}); best validation free-run NRMSE "
+    how = f"{args.search} search, {args.scheduler} scheduler"
+    print(f"\n{len(result.trials)} trials of {args.arch} ({args.strategy}; {how}); best validation free-run NRMSE "
           f"{result.best_valid_nrmse:.4f} with {result.best.to_dict()}")
     for row in sorted(result.trials, key=lambda r: (r["best_valid_nrmse"] is None, r["best_valid_nrmse"] or 0)):
         point = ", ".join(f"{k}={row[k]}" for k in sorted(grid))

@@ -6,22 +6,24 @@ and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
 e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
 compiled with the system C compiler. No Python, no libtorch inside.
 
-Behaviour of the FMU (details in ``templates/nnfmu_core.h``):
+Behaviour of the FMU (the reference is docs/fmu.md; the C side is ``templates/nnfmu_core.h``):
 
-- variables: the spec's inputs and outputs (names, units, descriptions), a
-  fixed parameter ``<y>_start`` per output (the initial output y0, start = the
-  output Variable's ``start``), the spec's parameters as tunable parameters
-  (they feed the ``p`` port at every sample), ``Ts`` as a constant, and
-  ``DefaultExperiment stepSize = Ts``;
-- the output at the start time is y0; the state ``x0 = init(y0, u0, p)`` is
-  computed at the first ``doStep`` from the ``<y>_start`` values and the
-  inputs set for that step (fmpy and most importers set inputs right before
-  each step, so u0 is exactly the first sample's input);
-- ``doStep(t, h)`` advances ``h / Ts`` samples with the inputs held; any other
-  ``h`` (relative tolerance 1e-9) is an error whose log message names Ts;
-- NaN or infinite inputs or results give an error status and a log message,
-  and the step is not taken; reset, FMU-state get/set/serialize and several
-  instances side by side work.
+- variables: the spec's inputs (names, units, descriptions, ``min``/``max``
+  where the spec's Variables give a valid range) and outputs, a fixed
+  parameter ``<y>_start`` per output (the initial output y0), the spec's
+  parameters as tunable parameters (they feed the ``p`` port at every sample),
+  ``Ts`` as a constant, the tunable parameters ``max_samples_per_step`` and
+  ``input_range_error``, and ``DefaultExperiment stepSize = Ts``;
+- time is counted in whole samples from the start time; ``doStep(t, h)``
+  accepts any ``h > 0`` and advances every sample instant in ``(t, t + h]``
+  with the inputs held, up to ``max_samples_per_step`` samples per call;
+- an input outside its valid range gives a Warning (an Error with
+  ``input_range_error = true``); non-finite values give an Error, and the step
+  is not taken; FMU states (also into a fresh instance), reset and several
+  instances side by side work; calls the FMI state machine forbids are Errors;
+- the listed sources build without libm at link time (``templates/nnfmu_libm.h``),
+  so fmpy's ``build_platform_binary`` or a plain ``cc -shared -fPIC`` over
+  them gives a binary that loads in any importer.
 """
 
 from __future__ import annotations
@@ -41,11 +43,16 @@ from pathlib import Path
 
 from nnfmu.atomic import write_atomic
 from nnfmu.errors import ConfigError, FmuBuildError
-from nnfmu.export import codegen, compiler, model_description
+from nnfmu.export import c_header, codegen, compiler, model_description
 from nnfmu.export.compiler import DEFAULT_FLAGS
 from nnfmu.system import CasadiModel
 
-TEMPLATES = ("nnfmu_core.h", "nnfmu_core.c")
+TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c",
+             "nnfmu_state.c", "nnfmu_libm.c")
+#: Compiled, in this order; model_casadi.c is not listed: nnfmu_model.c includes it (see nnfmu_libm.h).
+CORE_SOURCES = ("nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c", "nnfmu_state.c", "nnfmu_libm.c")
+#: nnfmu's own build links libm, so the model code calls it directly.
+OWN_BUILD_DEFINES = ("-DNNFMU_LINKS_LIBM",)
 WRAPPER = {2: ("nnfmu_fmi2.c",), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
@@ -119,9 +126,9 @@ def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_pa
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
     desc = model_description.describe(model.spec, token, stamp)
-    header = model_description.render_c_header(desc, code.n_x, code.entry_points)
+    header = c_header.render_c_header(desc, code.n_x, code.entry_points)
     (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
-    c_files = [code.c_file, "nnfmu_core.c", *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
+    c_files = [*CORE_SOURCES, *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
     return desc, c_files
 
 
@@ -138,7 +145,7 @@ def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: B
         desc.model_identifier + compiler.shared_library_suffix())
     compiler.compile_shared_library(
         [root / "sources" / f for f in c_files], binary, include_dirs=[root / "sources"],
-        flags=options.compile_flags(), compiler=options.compiler,
+        flags=[*options.compile_flags(), *OWN_BUILD_DEFINES], compiler=options.compiler,
         what=f"compiling the FMU binary of {model.spec.name!r}")
 
 
@@ -186,7 +193,8 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
     if out.is_dir():
         raise FmuBuildError(f"{str(out)!r} is a folder; pass the path of the .fmu file to write")
     if not out.parent.is_dir():
-        raise FmuBuildError(f"the folder {str(out.parent)!r} for the FMU does not exist; create it first")
+        problem = "is a file, not a folder" if out.parent.exists() else "does not exist; create it first"
+        raise FmuBuildError(f"cannot write {out}: the folder {str(out.parent)!r} for the FMU {problem}")
     with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
         _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options)
         write_atomic(out, lambda partial: _zip_tree(Path(tmp) / "fmu", partial))

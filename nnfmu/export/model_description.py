@@ -1,20 +1,23 @@
-"""One description of an FMU's variables, rendered into modelDescription.xml (FMI 2 and 3) and a C header.
+"""One description of an FMU's variables, rendered into modelDescription.xml (FMI 2 and 3).
 
 Value references are assigned once, in :func:`describe`, and every artefact
 that names a variable (the XML for FMI 2.0 or 3.0, FMI 3's
-``buildDescription.xml`` and the wrapper's ``nnfmu_model.h``) is rendered
-from that one :class:`FmuDescription`. The layout is::
+``buildDescription.xml`` and the wrapper's ``nnfmu_model.h``, see
+:mod:`nnfmu.export.c_header`) is rendered from that one :class:`FmuDescription`.
+The layout is::
 
-    vr 0                     time         independent
-    vr 1                     Ts           local constant, the sample time in s
-    vr 2 ...                 inputs       input, continuous (held over each sample)
-    then                     outputs      output, discrete (they change at sample times only)
-    then                     <y>_start    parameter, fixed: the initial outputs y0
-    then                     parameters   parameter, tunable: the ``p`` port
+    vr 0                     time                  independent
+    vr 1                     Ts                    local constant, the sample time in s
+    vr 2                     max_samples_per_step  parameter, tunable, Integer: the most samples one doStep takes
+    vr 3                     input_range_error     parameter, tunable, Boolean: out-of-range inputs are an error
+    vr 4 ...                 inputs                input, continuous (held over each sample), with min/max
+    then                     outputs               output, discrete (they change at sample times only)
+    then                     <y>_start             parameter, fixed: the initial outputs y0
+    then                     parameters            parameter, tunable: the ``p`` port
 
 The outputs at t0 are the ``<y>_start`` values, so they are initial unknowns
 that depend on those parameters only; outputs never depend directly on inputs
-(no feedthrough).
+(no feedthrough). The FMU's behaviour is described in docs/fmu.md.
 """
 
 from __future__ import annotations
@@ -29,8 +32,14 @@ from nnfmu.errors import FmuBuildError
 from nnfmu.system import SystemSpec
 
 GENERATION_TOOL = f"nnfmu {__version__}"
-LOG_CATEGORIES = (("logStatusError", "errors: bad calls, step sizes, non-finite values"),
-                  ("logStatusWarning", "warnings"))
+LOG_CATEGORIES = (("logStatusError", "errors: bad calls, calls not allowed in the current state, non-finite values"),
+                  ("logStatusWarning", "warnings: an input leaves its valid range [min, max]"))
+#: Default of the parameter max_samples_per_step: a doStep needing more samples is refused at once.
+MAX_SAMPLES_PER_STEP = 10_000_000
+RESERVED_NAMES = ("time", "Ts", "max_samples_per_step", "input_range_error")
+STEPPING_RULE = ("doStep(t, h) accepts any h > 0 and advances every sample instant t0 + k*Ts in (t, t+h] with the "
+                 "inputs held; the outputs are those of the last sample reached. Inputs outside [min, max] give "
+                 "a warning (input_range_error = true: an error)")
 _C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -48,11 +57,14 @@ class ScalarVariable:
     description: str
     role: str
     index: int = 0
+    type: str = "Real"  # Real, Integer or Boolean
+    min: float | None = None
+    max: float | None = None
 
 
 @dataclass(frozen=True)
 class FmuDescription:
-    """Everything that names a variable or identifies the FMU; rendered by the functions of this module."""
+    """Everything that names a variable or identifies the FMU; rendered by this module and c_header."""
 
     spec: SystemSpec
     variables: tuple[ScalarVariable, ...]
@@ -67,9 +79,15 @@ class FmuDescription:
     def units(self) -> list[str]:
         return sorted({v.unit for v in self.variables if v.unit})
 
+    @property
+    def description(self) -> str:
+        spec = self.spec
+        head = spec.description or f"{spec.name}: discrete-time model"
+        return f"{head}; Ts = {spec.Ts:g} s. {STEPPING_RULE}"
+
 
 def check_spec(spec: SystemSpec) -> None:
-    """Raise FmuBuildError if ``spec`` cannot become an FMU (C identifier, finite starts)."""
+    """Raise FmuBuildError if ``spec`` cannot become an FMU (C identifier, finite starts, names, ranges)."""
     if not _C_IDENTIFIER.fullmatch(spec.name):
         raise FmuBuildError(
             f"the model name {spec.name!r} becomes the FMU's modelIdentifier and must be an ASCII C "
@@ -77,32 +95,70 @@ def check_spec(spec: SystemSpec) -> None:
     for v in spec.inputs + spec.outputs + spec.parameters:
         if not math.isfinite(v.start):
             raise FmuBuildError(f"the start value of {v.name!r} is {v.start!r}; give it a finite start value")
+        if v.name in RESERVED_NAMES:
+            raise FmuBuildError(f"the variable name {v.name!r} is taken by the FMU itself "
+                                f"({', '.join(RESERVED_NAMES)}); rename the variable")
+    for v in spec.inputs:
+        if (v.min is not None and v.start < v.min) or (v.max is not None and v.start > v.max):
+            raise FmuBuildError(f"the start value {v.start!r} of input {v.name!r} lies outside its range "
+                                f"[{v.min}, {v.max}]; give it a start value inside")
 
 
 def describe(spec: SystemSpec, token: str, generation_time: str) -> FmuDescription:
     """Assign value references (see the module docstring) and return the one description of the FMU."""
     check_spec(spec)
     rows = [
-        ("time", "independent", "continuous", None, None, "s", "simulation time", "time", 0),
-        ("Ts", "local", "constant", "exact", spec.Ts, "s", "sample time of the discrete-time model", "Ts", 0),
+        dict(name="time", causality="independent", variability="continuous", unit="s",
+             description="simulation time", role="time"),
+        dict(name="Ts", causality="local", variability="constant", initial="exact", start=spec.Ts, unit="s",
+             description="sample time of the discrete-time model", role="Ts"),
+        dict(name="max_samples_per_step", causality="parameter", variability="tunable", initial="exact",
+             start=MAX_SAMPLES_PER_STEP, type="Integer", min=1, role="max_samples",
+             description="the most samples one doStep may take; a longer step is refused at once"),
+        dict(name="input_range_error", causality="parameter", variability="tunable", initial="exact", start=0,
+             type="Boolean", role="range_error",
+             description="true: an input outside its [min, max] is an error and the step is not taken; "
+                         "false: the step is taken and returns a warning"),
     ]
-    rows += [(v.name, "input", "continuous", None, v.start, v.unit, v.description, "input", i)
+    rows += [dict(name=v.name, causality="input", variability="continuous", start=v.start, unit=v.unit,
+                  description=v.description, role="input", index=i, min=v.min, max=v.max)
              for i, v in enumerate(spec.inputs)]
-    rows += [(v.name, "output", "discrete", "calculated", None, v.unit, v.description, "output", i)
+    rows += [dict(name=v.name, causality="output", variability="discrete", initial="calculated", unit=v.unit,
+                  description=v.description, role="output", index=i) for i, v in enumerate(spec.outputs)]
+    rows += [dict(name=f"{v.name}_start", causality="parameter", variability="fixed", initial="exact",
+                  start=v.start, unit=v.unit, role="output_start", index=i,
+                  description=f"initial value y0 of output {v.name} (the output at the start time)")
              for i, v in enumerate(spec.outputs)]
-    rows += [(f"{v.name}_start", "parameter", "fixed", "exact", v.start, v.unit,
-              f"initial value y0 of output {v.name} (the output at the start time)", "output_start", i)
-             for i, v in enumerate(spec.outputs)]
-    rows += [(v.name, "parameter", "tunable", "exact", v.start, v.unit, v.description, "parameter", i)
+    rows += [dict(name=v.name, causality="parameter", variability="tunable", initial="exact", start=v.start,
+                  unit=v.unit, description=v.description, role="parameter", index=i)
              for i, v in enumerate(spec.parameters)]
-    variables = tuple(ScalarVariable(name, vr, *rest) for vr, (name, *rest) in enumerate(rows))
+    defaults = dict(initial=None, start=None, unit="", description="", index=0)
+    variables = tuple(ScalarVariable(value_reference=vr, **{**defaults, **row}) for vr, row in enumerate(rows))
     return FmuDescription(spec, variables, spec.name, token, generation_time)
 
 
-def _num(x: float) -> str:
+def num(x: float) -> str:
     """Shortest round-trip decimal of a float, valid in XML and as a C double literal."""
     text = repr(float(x))
     return text if any(c in text for c in ".en") else text + ".0"
+
+
+def _start_text(v: ScalarVariable) -> str | None:
+    if v.start is None:
+        return None
+    if v.type == "Boolean":
+        return "true" if v.start else "false"
+    return str(int(v.start)) if v.type == "Integer" else num(v.start)
+
+
+def _bound_text(v: ScalarVariable, bound: float | None) -> str | None:
+    if bound is None:
+        return None
+    return str(int(bound)) if v.type == "Integer" else num(bound)
+
+
+def _value_attrs(v: ScalarVariable) -> dict[str, str]:
+    return _attrs(start=_start_text(v), min=_bound_text(v, v.min), max=_bound_text(v, v.max), unit=v.unit)
 
 
 def _to_text(root: ET.Element) -> str:
@@ -115,12 +171,10 @@ def _attrs(**kw) -> dict[str, str]:
 
 
 def _header_attrs(desc: FmuDescription, fmi_version: str) -> dict[str, str]:
-    spec = desc.spec
     token_key = "guid" if fmi_version == "2.0" else "instantiationToken"
-    return _attrs(fmiVersion=fmi_version, modelName=spec.name, **{token_key: desc.token},
-                  description=spec.description or f"{spec.name}: discrete-time model, Ts = {spec.Ts:g} s",
-                  generationTool=GENERATION_TOOL, generationDateAndTime=desc.generation_time,
-                  variableNamingConvention="flat")
+    return _attrs(fmiVersion=fmi_version, modelName=desc.spec.name, **{token_key: desc.token},
+                  description=desc.description, generationTool=GENERATION_TOOL,
+                  generationDateAndTime=desc.generation_time, variableNamingConvention="flat")
 
 
 def _units_and_experiment(root: ET.Element, desc: FmuDescription) -> None:
@@ -131,7 +185,7 @@ def _units_and_experiment(root: ET.Element, desc: FmuDescription) -> None:
     categories = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", name=name, description=text)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=_num(desc.spec.Ts))
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=num(desc.spec.Ts))
 
 
 def render_fmi2(desc: FmuDescription, source_files: list[str]) -> str:
@@ -151,7 +205,7 @@ def render_fmi2(desc: FmuDescription, source_files: list[str]) -> str:
         sv = ET.SubElement(variables, "ScalarVariable", _attrs(
             name=v.name, valueReference=str(v.value_reference), description=v.description,
             causality=v.causality, variability=v.variability, initial=v.initial))
-        ET.SubElement(sv, "Real", _attrs(start=None if v.start is None else _num(v.start), unit=v.unit))
+        ET.SubElement(sv, v.type, _value_attrs(v))
     index = {v.value_reference: i + 1 for i, v in enumerate(desc.variables)}  # FMI 2 indices are 1-based
     structure = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(structure, "Outputs")
@@ -164,21 +218,23 @@ def render_fmi2(desc: FmuDescription, source_files: list[str]) -> str:
     return _to_text(root)
 
 
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+
+
 def render_fmi3(desc: FmuDescription) -> str:
     """modelDescription.xml for FMI 3.0 Co-Simulation (the sources are in sources/buildDescription.xml)."""
     root = ET.Element("fmiModelDescription", _header_attrs(desc, "3.0"))
     ET.SubElement(root, "CoSimulation", modelIdentifier=desc.model_identifier,
-                  canHandleVariableCommunicationStepSize="true", fixedInternalStepSize=_num(desc.spec.Ts),
+                  canHandleVariableCommunicationStepSize="true", fixedInternalStepSize=num(desc.spec.Ts),
                   canGetAndSetFMUState="true", canSerializeFMUState="true",
                   providesDirectionalDerivatives="false", providesAdjointDerivatives="false",
                   hasEventMode="false", canReturnEarlyAfterIntermediateUpdate="false")
     _units_and_experiment(root, desc)
     variables = ET.SubElement(root, "ModelVariables")
     for v in desc.variables:
-        ET.SubElement(variables, "Float64", _attrs(
+        ET.SubElement(variables, _FMI3_TYPES[v.type], _attrs(
             name=v.name, valueReference=str(v.value_reference), description=v.description,
-            causality=v.causality, variability=v.variability, initial=v.initial,
-            start=None if v.start is None else _num(v.start), unit=v.unit))
+            causality=v.causality, variability=v.variability, initial=v.initial, **_value_attrs(v)))
     structure = ET.SubElement(root, "ModelStructure")
     for v in desc.by_role("output"):
         ET.SubElement(structure, "Output", valueReference=str(v.value_reference), dependencies="")
@@ -189,57 +245,10 @@ def render_fmi3(desc: FmuDescription) -> str:
 
 
 def render_build_description(desc: FmuDescription, source_files: list[str]) -> str:
-    """FMI 3's sources/buildDescription.xml: one C99 source file set, linked against libm."""
+    """FMI 3's sources/buildDescription.xml: one C99 source file set; no library to link (docs/fmu.md)."""
     root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
     config = ET.SubElement(root, "BuildConfiguration", modelIdentifier=desc.model_identifier)
     files = ET.SubElement(config, "SourceFileSet", language="C99")
     for name in source_files:
         ET.SubElement(files, "SourceFile", name=name)
-    ET.SubElement(config, "Library", name="m", external="true", description="the C math library (libm)")
     return _to_text(root)
-
-
-def _c_string(text: str) -> str:
-    """A C string literal of ``text`` (UTF-8; anything but plain ASCII escaped in octal)."""
-    out = []
-    for byte in text.encode("utf-8"):
-        ch = chr(byte)
-        out.append(ch if 32 <= byte < 127 and ch not in '\\"?%' else f"\\{byte:03o}")
-    return '"' + "".join(out) + '"'
-
-
-def _c_array(ctype: str, name: str, values: list[str]) -> str:
-    body = ", ".join(values) if values else "0"  # C forbids empty arrays: a placeholder, never read
-    return f"static const {ctype} {name}[{max(1, len(values))}] = {{{body}}};"
-
-
-def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str]) -> str:
-    """``nnfmu_model.h``: sizes, value-reference layout, start values and the prefixed CasADi entry points."""
-    spec = desc.spec
-    first = {role: desc.by_role(role)[0].value_reference if desc.by_role(role) else len(desc.variables)
-             for role in ("input", "output", "output_start", "parameter")}
-    lines = [
-        "/* Generated by nnfmu from the description that also produced modelDescription.xml. Do not edit. */",
-        "#ifndef NNFMU_MODEL_H", "#define NNFMU_MODEL_H", "",
-        f"#define NNFMU_MODEL_IDENTIFIER {_c_string(desc.model_identifier)}",
-        f"#define NNFMU_TOKEN {_c_string(desc.token)}",
-        f"#define NNFMU_TS {_num(spec.Ts)} /* sample time, s */",
-        f"#define NNFMU_NU {spec.n_u}", f"#define NNFMU_NY {spec.n_y}", f"#define NNFMU_NP {spec.n_p}",
-        f"#define NNFMU_NX {n_x}", "",
-        "/* value references: u[i] has NNFMU_VR_U + i, and so on */",
-        "#define NNFMU_VR_TIME 0", "#define NNFMU_VR_TS 1",
-        f"#define NNFMU_VR_U {first['input']}", f"#define NNFMU_VR_Y {first['output']}",
-        f"#define NNFMU_VR_Y_START {first['output_start']}", f"#define NNFMU_VR_P {first['parameter']}",
-        f"#define NNFMU_N_VR {len(desc.variables)}", "",
-        "/* the CasADi functions, with this model's unique symbol prefix */",
-    ]
-    lines += [f"#define {macro} {symbol}" for macro, symbol in sorted(entry_points.items())]
-    lines.append("")
-    for role, c_name in (("input", "u"), ("output", "y"), ("parameter", "p")):
-        names = [_c_string(v.name) for v in desc.by_role(role)]
-        lines.append(_c_array("char* const", f"nnfmu_{c_name}_names", names))
-    starts = {"u": spec.inputs, "y": spec.outputs, "p": spec.parameters}
-    for c_name, group in starts.items():
-        lines.append(_c_array("double", f"nnfmu_{c_name}_start", [_num(v.start) for v in group]))
-    lines += ["", "#endif /* NNFMU_MODEL_H */", ""]
-    return "\n".join(lines)

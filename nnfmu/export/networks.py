@@ -30,6 +30,7 @@ from nnfmu.export.init_window import init_function
 from nnfmu.export.ensemble import ensemble_to_casadi
 from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.system import CasadiModel, SystemSpec, Variable
+from nnfmu.valid_range import stored_input_variables
 
 _MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
 _VERIFY_RTOL = 1e-9
@@ -179,8 +180,7 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
     spec = SystemSpec(
         name=_identifier(name or meta.get("name") or f"{model.config.arch}_model"),
         Ts=float(meta["Ts"]),
-        inputs=tuple(Variable(**{k: ch[k] for k in ("name", "unit", "description") if k in ch})
-                     for ch in meta["inputs"]),
+        inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the valid range
         outputs=tuple(Variable(**ch) for ch in channels),
         description=f"{model.config.arch.upper()} network exported by nnfmu",
         source=_provenance(model),

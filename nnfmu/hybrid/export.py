@@ -30,6 +30,7 @@ from nnfmu.export import casadi_nets as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
 from nnfmu.physics import rk4_step
 from nnfmu.system import CasadiModel, SystemSpec, Variable
+from nnfmu.valid_range import stored_input_variables
 
 _VERIFY_RTOL = 1e-9
 
@@ -118,7 +119,7 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
     spec = SystemSpec(
         name=_identifier(name or meta.get("name") or f"{model.physics.name}_hybrid"),
         Ts=model.Ts,
-        inputs=tuple(Variable(ch["name"], ch.get("unit", ""), ch.get("description", "")) for ch in meta["inputs"]),
+        inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the training range
         outputs=tuple(Variable(ch["name"], ch.get("unit", ""), ch.get("description", "")) for ch in meta["outputs"]),
         parameters=model.physics_variables(),
         description=f"hybrid model exported by nnfmu: {model.physics.description} + neural correction "

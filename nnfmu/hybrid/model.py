@@ -148,6 +148,14 @@ class HybridStepModel(StepModel):
         self.correction = _correction_mlp(config, system.n_x, len(config.corrected_states))
         self._check_sizes()
 
+    def _apply(self, fn, recurse=True):
+        """``.to(device)`` moves the float64 constants too (their dtype stays float64, see ``__init__``)."""
+        super()._apply(fn, recurse)
+        device = self.u_mean.device
+        for name in ("_p_given", "_trained", "_state_scale", "_corrected", "_scatter"):
+            setattr(self, name, getattr(self, name).to(device))
+        return self
+
     # ---- physics ----------------------------------------------------------------------------
     @property
     def physics(self) -> PhysicsSystem:

@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from nnfmu.data import Dataset, Trajectories
 from nnfmu.errors import ConfigError, ShapeError, check_options
@@ -42,6 +43,7 @@ from nnfmu.linear.statespace import (
 )
 from nnfmu.linear.subspace import fit_subspace, realise, refit_inputs, usable_columns
 from nnfmu.metrics import nrmse
+from nnfmu.valid_range import training_range
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -166,24 +168,37 @@ def _subspace_model(fit, order: int, us, ys, radius: float) -> tuple[StateSpace,
     return StateSpace(stable_A, B, b, C, d), stable_A is not A
 
 
-def _choose_order(fit, config: LinearConfig, train, check) -> tuple[int, dict]:
+def _choose_order(fit, config: LinearConfig, train, check, progress: bool) -> tuple[int, dict]:
     """The order (step 3) and the validation NRMSE of every order tried."""
     radius = 0.999 * config.max_spectral_radius
     scores = {}
     top = fit.singular_values[0]
-    for n in range(1, min(config.max_order, fit.max_order) + 1):
+    orders = tqdm(range(1, min(config.max_order, fit.max_order) + 1), disable=not progress, unit="order",
+                  desc="linear: choose the order", dynamic_ncols=True)
+    for n in orders:
         if fit.singular_values[n - 1] <= 1e-10 * top:
             break  # the data show no more states
         sys, _ = _subspace_model(fit, n, *train, radius)
         scores[n] = free_run_nrmse(sys, config.init, *check)
+        orders.set_postfix(order=n, nrmse=f"{scores[n]:.4f}", best=min(scores, key=scores.get))
+    orders.close()
     best = min(scores.values())
     limit = best + max(config.order_tolerance * best, 1e-6)
     return min(n for n, v in scores.items() if v <= limit), scores
 
 
-def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float) -> tuple[StateSpace, dict]:
-    result = refine(sys, *train, init=config.init, x0=config.refine_x0,
-                    max_radius=config.max_spectral_radius, max_evaluations=config.max_evaluations)
+def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float,
+            progress: bool) -> tuple[StateSpace, dict]:
+    bar = tqdm(total=config.max_evaluations, disable=not progress, unit="evaluation", dynamic_ncols=True,
+               desc=f"linear: refine order {sys.n_x} (output error)")
+
+    def show(evaluations: int, cost: float, best: float) -> None:
+        bar.update(evaluations - bar.n)
+        bar.set_postfix(cost=f"{cost:.6g}", best=f"{best:.6g}")
+
+    with bar:
+        result = refine(sys, *train, init=config.init, x0=config.refine_x0, max_radius=config.max_spectral_radius,
+                        max_evaluations=config.max_evaluations, report=show)
     after = free_run_nrmse(result.system, config.init, *check)
     accepted = after <= before
     report = {"x0": config.refine_x0, "evaluations": result.evaluations, "message": result.message,
@@ -192,7 +207,8 @@ def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float) 
     return (result.system if accepted else sys), report
 
 
-def identify_linear(dataset: Dataset, config: LinearConfig | None = None, **options) -> LinearModel:
+def identify_linear(dataset: Dataset, config: LinearConfig | None = None, *, progress: bool = False,
+                    **options) -> LinearModel:
     """Identify a linear state-space baseline from ``dataset``'s training split.
 
     Parameters
@@ -202,6 +218,9 @@ def identify_linear(dataset: Dataset, config: LinearConfig | None = None, **opti
         the order and guards the refinement.
     config : LinearConfig, optional
         All options; or give them as keywords (``order=12, init="zero-offset"``), not both.
+    progress : bool
+        Progress bars: the orders tried (with their validation NRMSE), then the refinement's
+        residual evaluations (with the cost, half the sum of squared normalised errors).
 
     Returns
     -------
@@ -222,7 +241,7 @@ def identify_linear(dataset: Dataset, config: LinearConfig | None = None, **opti
     if config.order is not None:
         order, scores = config.order, {}
     else:
-        order, scores = _choose_order(fit, config, train, check)
+        order, scores = _choose_order(fit, config, train, check, progress)
     sys, stabilised = _subspace_model(fit, order, *train, 0.999 * config.max_spectral_radius)
     before = free_run_nrmse(sys, config.init, *check)
     info = {"method": "N4SID (state sequence), then output-error least squares" if config.refine else "N4SID",
@@ -231,8 +250,8 @@ def identify_linear(dataset: Dataset, config: LinearConfig | None = None, **opti
             "scored_on": check_split, "nrmse_subspace": before, "config": dataclasses.asdict(config),
             "dataset": dict(dataset.source)}
     if config.refine:
-        sys, info["refinement"] = _refine(sys, config, train, check, before)
+        sys, info["refinement"] = _refine(sys, config, train, check, before, progress)
     info["nrmse_valid"] = free_run_nrmse(sys, config.init, *check)
     info["spectral_radius"] = sys.spectral_radius
     return LinearModel(scaling.physical(sys), config.init, st.y_std, dataset.Ts,
-                       dataset.inputs, dataset.outputs, info)
+                       dataset.inputs, dataset.outputs, info, tuple(training_range(dataset.train.u)))

@@ -27,7 +27,8 @@ from nnfmu.atomic import write_text_atomic
 from nnfmu.data import Channel
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, ShapeError
 from nnfmu.linear.statespace import INIT_OPTIONS, StateSpace, free_run, init_gains
-from nnfmu.system import CasadiModel, SystemSpec
+from nnfmu.system import CasadiModel, SystemSpec, Variable
+from nnfmu.valid_range import with_ranges
 
 FORMAT = "nnfmu-linear"
 
@@ -51,6 +52,9 @@ class LinearModel:
         Names and units, as in the dataset.
     info : dict
         How the model was identified (order, singular values, scores); JSON-serialisable.
+    input_range : tuple of (min, max) or None
+        Per input, the valid range the FMU declares: the training data's range widened by
+        :data:`nnfmu.valid_range.RANGE_MARGIN` (None for a model saved without one).
     """
 
     system: StateSpace
@@ -60,6 +64,7 @@ class LinearModel:
     inputs: tuple[Channel, ...]
     outputs: tuple[Channel, ...]
     info: dict = field(default_factory=dict)
+    input_range: tuple | None = None
 
     def __post_init__(self) -> None:
         if self.init not in INIT_OPTIONS:
@@ -112,7 +117,9 @@ class LinearModel:
         text = description or (f"linear state-space model, {self.n_x} states, init rule '{self.init}'")
         source = {"kind": "linear", "init": self.init, "order": self.n_x,
                   **{k: self.info[k] for k in ("nrmse_valid", "dataset") if k in self.info}}
-        return SystemSpec(name=name, Ts=self.Ts, inputs=self.inputs, outputs=self.outputs,
+        inputs = with_ranges([Variable(c.name, c.unit, getattr(c, "description", "")) for c in self.inputs],
+                             self.input_range)
+        return SystemSpec(name=name, Ts=self.Ts, inputs=inputs, outputs=self.outputs,
                           description=text, source=source)
 
     def casadi_model(self, name: str = "linear", description: str | None = None) -> CasadiModel:
@@ -147,16 +154,12 @@ class LinearModel:
             "inputs": [c.to_json() for c in self.inputs], "outputs": [c.to_json() for c in self.outputs],
             "A": sys.A.tolist(), "B": sys.B.tolist(), "C": sys.C.tolist(), "D": self.D.tolist(),
             "b": sys.b.tolist(), "d": sys.d.tolist(), "y_scale": self.y_scale.tolist(), "info": self.info,
+            "input_range": None if self.input_range is None else [list(r) for r in self.input_range],
         }
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the model as JSON to ``path`` (via a temporary file, so nothing half-written remains)."""
-        path = Path(path)
-        try:
-            write_text_atomic(path, json.dumps(self.to_json(), indent=1) + "\n")
-        except OSError as exc:
-            raise DataFileError(f"cannot write the linear model to {path}: {exc}; choose a writable path") from exc
-        return path
+        return write_text_atomic(Path(path), json.dumps(self.to_json(), indent=1) + "\n")
 
 
 def load_linear(path: str | os.PathLike) -> LinearModel:
@@ -177,6 +180,7 @@ def load_linear(path: str | os.PathLike) -> LinearModel:
                          arrays["C"].reshape(-1, n), arrays["d"])
         return LinearModel(sys, raw["init"], arrays["y_scale"], float(raw["Ts"]),
                            tuple(Channel(**c) for c in raw["inputs"]),
-                           tuple(Channel(**c) for c in raw["outputs"]), raw.get("info", {}))
+                           tuple(Channel(**c) for c in raw["outputs"]), raw.get("info", {}),
+                           None if raw.get("input_range") is None else tuple(map(tuple, raw["input_range"])))
     except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: damaged nnfmu linear model ({type(exc).__name__}: {exc})") from exc

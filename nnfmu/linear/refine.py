@@ -38,8 +38,10 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
+import scipy.linalg.blas
 import scipy.optimize
 
 from nnfmu.errors import ConfigError
@@ -93,8 +95,9 @@ def _compress(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class _Problem:
     """Compressed residuals and Jacobian of the free-run error, in the coordinates ``beta``."""
 
-    def __init__(self, sys: StateSpace, us, ys, init: str, x0: str, max_radius: float):
+    def __init__(self, sys: StateSpace, us, ys, init: str, x0: str, max_radius: float, report=None):
         self.start, self.init, self.fit_x0, self.max_radius = sys, init, x0 == "fit", max_radius
+        self.report, self.evaluations, self.best = report, 0, np.inf
         self.with_b = init == "estimate"
         n, n_u, n_y = sys.n_x, sys.B.shape[1], sys.C.shape[0]
         self.shapes = [(n, n), (n, n_u), (n_y, n)]
@@ -141,7 +144,16 @@ class _Problem:
                 if self.penalty is not None and not np.isfinite(out[0]).all():
                     out = (self.penalty, np.zeros((self.n_dir + 1, self.n_dir)))
             self.cache = (key, *out)
+            self._count(0.5 * float(out[0] @ out[0]))
         return self.cache[1], self.cache[2]
+
+    def _count(self, cost: float) -> None:
+        if self.penalty is None:  # the starting point, evaluated in __init__, is not an evaluation of the fit
+            return
+        self.evaluations += 1
+        self.best = min(self.best, cost)
+        if self.report is not None:
+            self.report(self.evaluations, cost, self.best)
 
     def _rule_x0(self, sys: StateSpace) -> np.ndarray:
         if self.init == "zero-offset":
@@ -191,16 +203,18 @@ class _Problem:
         resid = (yhat - self.y) * self.mask[:, :, None]
         obs = _observability(sys, n_steps) if self.fit_x0 else None
         width = (n if self.fit_x0 else 0) + n_dir + 1
-        gram = np.zeros((batch, width, width))
+        # per trajectory only where its initial state is eliminated; otherwise one sum over every row
+        gram = np.zeros((batch if self.fit_x0 else 1, width, width), order="F")
         chunk = int(np.clip(_CHUNK_SIZE // (n * batch * n_dir), 1, n_steps))
         for start in range(0, n_steps, chunk):
             span = slice(start, min(start + chunk, n_steps))
             block, sens = self._chunk_rows(sys, xs[:, span], self.u[:, span], sens)
             parts = ([np.broadcast_to(obs[span], (batch,) + obs[span].shape)] if self.fit_x0 else [])
             block = np.concatenate(parts + [block, resid[:, span, :, None]], axis=3)
-            block = (block * self.mask[:, span, None, None]).reshape(batch, -1, width)
-            for i in range(batch):  # 2-D products reach BLAS's symmetric rank-k update
-                gram[i] += block[i].T @ block[i]
+            block = (block * self.mask[:, span, None, None]).reshape(len(gram), -1, width)
+            for i in range(len(gram)):  # BLAS's symmetric rank-k update: half the products of B^T B
+                gram[i] = _syrk(block[i].T, gram[i])
+        gram = np.triu(gram) + np.triu(gram, 1).transpose(0, 2, 1)
         if self.fit_x0:  # Schur complement: eliminate the initial states
             g_oo, g_or = gram[:, :n, :n], gram[:, :n, n:]
             gram = gram[:, n:, n:] - g_or.transpose(0, 2, 1) @ np.linalg.pinv(g_oo, rcond=1e-12) @ g_or
@@ -229,6 +243,11 @@ class _Problem:
         return rows, state.reshape(n, batch, n_dir)
 
 
+def _syrk(a_t: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """``acc + a_t @ a_t.T`` in the upper triangle (``a_t`` (k, rows), F-ordered ``acc`` (k, k)): BLAS ``dsyrk``."""
+    return scipy.linalg.blas.dsyrk(1.0, a_t, beta=1.0, c=acc, trans=0, lower=0, overwrite_c=True)
+
+
 def _observability(sys: StateSpace, n_steps: int) -> np.ndarray:
     """``C A^k`` for ``k = 0 .. n_steps-1``, shape (n_steps, n_y, n)."""
     out = np.empty((n_steps,) + sys.C.shape)
@@ -239,7 +258,7 @@ def _observability(sys: StateSpace, n_steps: int) -> np.ndarray:
 
 
 def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: float,
-           max_evaluations: int) -> RefineResult:
+           max_evaluations: int, report: Callable[[int, float, float], None] | None = None) -> RefineResult:
     """Fit ``sys`` to normalised trajectories by free-run output error.
 
     Parameters
@@ -256,13 +275,15 @@ def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: 
         Spectral radius that no accepted ``A`` may reach.
     max_evaluations : int
         Residual evaluations allowed to ``least_squares``.
+    report : callable, optional
+        ``report(evaluations, cost, best_cost)`` after every evaluation (progress display).
     """
     if not sys.spectral_radius < max_radius:
         raise ConfigError(f"refinement must start from a stable system, got spectral radius {sys.spectral_radius:.6g} "
                           f">= max_radius {max_radius}; pull the eigenvalues in first (nnfmu.linear.stabilise)")
     if x0 not in X0_OPTIONS:
         raise ConfigError(f"x0 must be one of {', '.join(X0_OPTIONS)}, got {x0!r}")
-    problem = _Problem(sys, us, ys, init, x0, max_radius)
+    problem = _Problem(sys, us, ys, init, x0, max_radius, report)
     if problem.n_dir == 0:
         return RefineResult(sys, problem.cost0, problem.cost0, 0, "nothing to refine")
     result = scipy.optimize.least_squares(problem.residuals, np.zeros(problem.n_dir), jac=problem.jacobian,

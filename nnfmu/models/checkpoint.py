@@ -14,20 +14,26 @@ unrestricted pickle) and holds::
     resume                   what ``--resume`` needs: the LATEST weights, optimizer state, epoch,
                              torch RNG state, early-stopping counter, elapsed time (or None)
 
-Files are written atomically (temp file + ``os.replace``), so an interrupted
-write never leaves a half checkpoint behind.
+Files are written atomically (:func:`nnfmu.atomic.write_atomic`), so an
+interrupted write never leaves a half checkpoint behind; a write error names
+the file and its cause (:class:`~nnfmu.errors.DataFileError`). A file that
+would need unrestricted unpickling is refused with a message that says why
+(it could run code), never with torch's advice to load it anyway.
 """
 
 from __future__ import annotations
 
+import io
 import os
+import pickle
+import re
 from pathlib import Path
 from typing import Mapping
 
 import torch
 
-from nnfmu.atomic import write_atomic
-from nnfmu.errors import CheckpointError, DataFileError, NnfmuError
+from nnfmu.atomic import describe_os_error, write_atomic
+from nnfmu.errors import CheckpointError, NnfmuError
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.registry import build_model
@@ -35,11 +41,13 @@ from nnfmu.models.registry import build_model
 FORMAT = "nnfmu-checkpoint"
 VERSION = 1
 _REQUIRED = ("model_config", "meta", "state_dict")
+_UNSUPPORTED = re.compile(r"(?i)unsupported (GLOBAL [\w.]+)")
 
 
 def state_snapshot(model: torch.nn.Module) -> dict:
-    """Detached copies of the model's weights and buffers (a ``state_dict`` that later training cannot change)."""
-    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+    """Detached CPU copies of the model's weights and buffers (a ``state_dict`` that later training cannot
+    change, and that loads on any device)."""
+    return {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
 
 
 def save_checkpoint(
@@ -75,10 +83,9 @@ def save_checkpoint(
         "summary": dict(summary or {}),
         "resume": None if resume is None else dict(resume),
     }
-    try:
-        return write_atomic(path, lambda tmp: torch.save(payload, tmp))
-    except OSError as exc:
-        raise DataFileError(f"cannot write checkpoint {path}: {exc}; choose a writable --out path") from exc
+    buffer = io.BytesIO()  # serialise in memory: torch's own file writer turns a full disk into a RuntimeError
+    torch.save(payload, buffer)
+    return write_atomic(path, lambda tmp: tmp.write_bytes(buffer.getbuffer()))
 
 
 
@@ -95,9 +102,12 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
         raise CheckpointError(f"no checkpoint file at {path}; pass the .pt file written by 'nnfmu train --out'")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except OSError as exc:  # the file cannot be opened (permissions ...), or its zip structure is broken
+        if exc.filename is None:
+            raise _unreadable(path, exc) from None
+        raise CheckpointError(f"cannot read the checkpoint {describe_os_error(exc, path)}") from exc
     except Exception as exc:  # torch raises many types for corrupt or foreign files
-        raise CheckpointError(f"{path} is not a readable torch checkpoint (corrupt, truncated or another file "
-                              f"type): {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from exc
+        raise _unreadable(path, exc) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise CheckpointError(f"{path} is a torch file but not an nnfmu checkpoint (expected format {FORMAT!r}); "
                               "train a model with 'nnfmu train' to get one")
@@ -108,6 +118,21 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     if missing:
         raise CheckpointError(f"{path} lacks {missing}; the checkpoint is damaged, train again")
     return ckpt
+
+
+def _unreadable(path: Path, exc: Exception) -> CheckpointError:
+    """The error for a file torch cannot load with weights_only=True; never repeats torch's advice to
+    load it with weights_only=False (that would run whatever code the file holds)."""
+    text = str(exc)
+    if isinstance(exc, pickle.UnpicklingError) and "weights only load failed" in text.lower():
+        found = _UNSUPPORTED.search(text)
+        return CheckpointError(
+            f"{path} is not a plain nnfmu checkpoint: it holds Python objects"
+            f"{f' ({found.group(1)})' if found else ''} that only unrestricted unpickling could load, which can "
+            f"run code hidden in the file; nnfmu refuses it. Do not load it with weights_only=False; use a "
+            f"checkpoint written by 'nnfmu train'")
+    return CheckpointError(f"{path} is not a readable torch checkpoint (corrupt, truncated or another file "
+                           f"type): {type(exc).__name__}: {text.splitlines()[0] if text else ''}")
 
 
 def model_from_checkpoint(ckpt: Mapping, state_dict: Mapping | None = None, where: str = "checkpoint") -> StepModel:

@@ -56,7 +56,8 @@ from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params
 from nnfmu.system import Variable
 
 __all__ = ["ArmParams", "arm_system", "arm_links", "arm_friction", "counterbalance_torque",
-           "ARM_TS", "ARM_F_B_CAP", "ARM_N_SUB", "ARM_Q_LIMITS_DEG", "Q_DH_OFFSET", "THETA_OFFSET"]
+           "ARM_TS", "ARM_F_B_CAP", "ARM_N_SUB", "ARM_Q_LIMITS_DEG", "ARM_TAU_LIMITS_NM", "Q_DH_OFFSET",
+           "THETA_OFFSET"]
 
 ARM_TS = 0.1
 ARM_F_B_CAP = 500.0  # s/rad: stiction slope used by the RK4 model (see the module docstring)
@@ -66,6 +67,10 @@ THETA_OFFSET = (0.0, -math.pi / 2, math.pi, 0.0, 0.0, 0.0)
 # Joint limits in degrees of q_DH (the KUKA axis angles), physics.md's table.
 ARM_Q_LIMITS_DEG = ((-147.0, 147.0), (-140.0, -5.0), (-112.0, 153.0),
                     (-350.0, 350.0), (-122.5, 122.5), (-350.0, 350.0))
+# Motor torque limits in N m: the inputs' valid range, declared as min/max by an FMU of the model. An
+# assumption (the KR300's motor data are not public): about twice the largest torque per axis in the
+# benchmark's records (8.8, 15.3, 19.9, 3.4, 4.7, 2.8 N m), rounded up.
+ARM_TAU_LIMITS_NM = ((-20.0, 20.0), (-35.0, 35.0), (-40.0, 40.0), (-8.0, 8.0), (-10.0, 10.0), (-6.0, 6.0))
 
 _J6 = tuple(range(6))
 
@@ -187,7 +192,8 @@ def arm_system(params: ArmParams | None = None, *, f_b_cap: float | None = ARM_F
         tuple(Variable(f"qd{j + 1}", "rad/s", f"velocity of joint {j + 1}") for j in _J6)
     return PhysicsSystem(
         name="arm", Ts=ARM_TS, n_sub=ARM_N_SUB, ode=ode, output=output, init_state=init_state, states=states,
-        inputs=tuple(Variable(c.name, c.unit, c.description) for c in ROBOT_INPUTS),
+        inputs=tuple(Variable(c.name, c.unit, c.description, min=lo, max=hi)
+                     for c, (lo, hi) in zip(ROBOT_INPUTS, ARM_TAU_LIMITS_NM, strict=True)),
         outputs=tuple(Variable(c.name, c.unit, c.description) for c in ROBOT_OUTPUTS),
         parameters=variables, state_scales=(1.0,) * 6 + (0.5,) * 6,
         description="KUKA KR300 R2500 rigid arm with friction and counterbalance (physics.md section 3), RK4",

@@ -45,8 +45,10 @@ VALVE_STATES = (
     Variable("sdot", "m/s", "plunger velocity"),
 )
 _STATE_SCALES = (1e-4, 0.5, 1e-4, 0.5, 5e5, 1e-3, 0.5)
-_INPUTS = (Variable("u1", "V", "piezo voltage of the supply pilot (opens supply -> chamber)"),
-           Variable("u2", "V", "piezo voltage of the exhaust pilot (opens chamber -> exhaust)"))
+# The piezo drive range [0, VALVE_U_MAX] is the inputs' valid range: an FMU of the model declares it as min/max.
+_INPUTS = (Variable("u1", "V", "piezo voltage of the supply pilot (opens supply -> chamber)", min=0.0, max=VALVE_U_MAX),
+           Variable("u2", "V", "piezo voltage of the exhaust pilot (opens chamber -> exhaust)", min=0.0,
+                    max=VALVE_U_MAX))
 _OUTPUTS = (Variable("s", "m", "plunger position"), Variable("p", "Pa", "control-chamber pressure (absolute)"))
 
 

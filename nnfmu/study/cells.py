@@ -36,6 +36,9 @@ class Cell:
     done : callable, optional
         ``done() -> bool``: an extra test for completeness (e.g. a training checkpoint that
         was written after every epoch but whose run has not finished yet is not done).
+    where : {'any', 'driver'}
+        Where a parallel run (:mod:`nnfmu.study.parallel`) may run it: in any worker, or only in
+        the process that drives the study (cells reading the user's files, Ray Tune searches).
     """
 
     key: str
@@ -43,6 +46,7 @@ class Cell:
     inputs: tuple[Path, ...]
     run: Callable[[], str]
     done: Callable[[], bool] | None = None
+    where: str = "any"
 
     def is_done(self) -> bool:
         if not all(p.exists() for p in self.outputs):

@@ -54,7 +54,8 @@ class Study:
 
     def __init__(self, system: str, out: str | Path, budget: Budget, *, data: str | Path | None = None,
                  tune: bool | None = None, seed: int = 0, address: str | None = None, progress: bool = True,
-                 callback: TrainCallback | None = None, echo: Callable[[str], None] | None = print):
+                 callback: TrainCallback | None = None, echo: Callable[[str], None] | None = print,
+                 jobs: int = 1, device: str = "auto", threads: int | None = None):
         if system not in SYSTEMS:
             raise ConfigError(f"unknown system {system!r}; choose one of {', '.join(SYSTEMS)}")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -63,6 +64,10 @@ class Study:
         self.source = None if data is None else Path(data).resolve()
         self.tune = budget.tune if tune is None else bool(tune)
         self.address, self.progress, self.callback, self.echo = address, progress, callback, echo
+        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+            raise ConfigError(f"jobs must be a positive integer (cells run at once), got {jobs!r}")
+        self.jobs, self.device = jobs, device
+        self.threads = budget.threads if threads is None else threads
         self.data_dir = self.out / "data"
         self._ray = contextlib.ExitStack()
         self._ray_started = False
@@ -113,14 +118,14 @@ class Study:
         data = self.data_dir
         src = () if self.source is None or self.source.is_dir() else (self.source,)
         cells = [Cell("data", (data,), src, lambda: steps.prepare_data(
-            self.system, self.budget, self.seed, self.source, data, self.progress))]
+            self.system, self.budget, self.seed, self.source, data, self.progress), where="driver")]
         for arch, strategy in self.networks:
             cells += self._network_cells(arch, strategy)
         lin_json, lin_fmu, phys_fmu = self.out / "models" / "linear.json", self.path("fmus", "linear"), \
             self.path("fmus", "physics")
         cells += [
             Cell("identify linear baseline", (lin_json,), (data,),
-                 lambda: steps.identify_baseline(data, dict(self.budget.linear), lin_json)),
+                 lambda: steps.identify_baseline(data, dict(self.budget.linear), lin_json, self.progress)),
             Cell("export linear baseline", (lin_fmu,), (lin_json,),
                  lambda: steps.export_linear(lin_json, lin_fmu, self.fmu_name("linear"))),
             Cell("export physics model", (phys_fmu,), (), lambda: steps.export_physics(self.system, phys_fmu)),
@@ -138,12 +143,12 @@ class Study:
         cells = []
         if self.tune:
             cells.append(Cell(f"tune {arch} {strategy}", (tuned,), (self.data_dir,),
-                              lambda: self._tune(arch, strategy, tuned)))
+                              lambda: self._tune(arch, strategy, tuned), where="driver"))
         cells += [
             Cell(f"train {arch} {strategy}", (ckpt,), inputs,
                  lambda: steps.train_network(self.data_dir, arch, strategy, self.hyper(arch, strategy),
                                              self.budget, self.seed, ckpt, inputs, self.progress,
-                                             self._epoch_callback(name)),
+                                             self._epoch_callback(name), self.device, self.threads),
                  done=lambda: steps.training_finished(ckpt)),
             Cell(f"export {arch} {strategy}", (fmu,), (ckpt,),
                  lambda: steps.export_network(ckpt, fmu, self.fmu_name(name))),
@@ -186,21 +191,50 @@ class Study:
         inputs = tuple(self.path("scores", n) for n in names) + tuple(self.path("models", network_name(a, s))
                                                                       for a, s in self.networks)
         outputs = (self.out / "results.md", self.out / "results.json")
-        return Cell("write results.md, results.json and figures", outputs, inputs, lambda: write_results(self))
+        # on the driver: the report reads the whole study folder, not only the files named as inputs
+        return Cell("write results.md, results.json and figures", outputs, inputs, lambda: write_results(self),
+                    where="driver")
 
     # ---- running ---------------------------------------------------------------------------------
+    def _run_parallel(self) -> CellLog:
+        """Up to ``jobs`` cells at once, in local processes or as Ray tasks (:mod:`nnfmu.study.parallel`)."""
+        from nnfmu.study import parallel
+
+        if self.address:
+            from nnfmu.study.ray_connect import ray_session
+
+            ray = self._ray.enter_context(ray_session(self.address))
+            self._ray_started = True
+            gpus = 1.0 if self.device.startswith("cuda") else 0.0
+            pool = parallel.RayPool(ray, cpus=self.threads, gpus=gpus)
+            jobs = self.jobs if self.jobs > 1 else max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))
+        else:
+            pool, jobs = parallel.LocalPool(self.jobs), self.jobs
+        try:
+            return parallel.run_cells_parallel(self.cells(), pool, parallel.study_spec(self), self.out, jobs,
+                                               echo=self.echo)
+        finally:
+            pool.close()
+
     def run(self) -> StudyResult:
         if self.tune:
             from nnfmu.study.tune import require_ray
 
             require_ray()  # a missing extra is said before any work, not after the data are made
         steps.check_source(self.system, self.source, self.data_dir)  # bad --data: say so and leave the folder alone
+        from nnfmu.training.resources import check_threads, resolve_device
+
+        check_threads(self.threads)
+        resolve_device(self.device)  # a missing GPU is said before any work
         self.check_manifest()
         from nnfmu.models.base import torch_threads
 
         try:
-            with torch_threads(self.budget.threads):
-                log = run_cells(self.cells(), echo=self.echo)
+            with torch_threads(self.threads):
+                if self.address or self.jobs > 1:
+                    log = self._run_parallel()
+                else:
+                    log = run_cells(self.cells(), echo=self.echo)
         finally:
             self._ray.close()
             self._ray_started = False
@@ -210,7 +244,8 @@ class Study:
 
 def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", data: str | Path | None = None,
               tune: bool | None = None, seed: int = 0, address: str | None = None, progress: bool = True,
-              callback: TrainCallback | None = None, echo: Callable[[str], None] | None = print) -> StudyResult:
+              callback: TrainCallback | None = None, echo: Callable[[str], None] | None = print,
+              jobs: int = 1, device: str = "auto", threads: int | None = None) -> StudyResult:
     """Run (or resume) the paper's study of ``system`` into the folder ``out``.
 
     Parameters
@@ -228,15 +263,23 @@ def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", d
     seed : int
         Seeds the generated data, the validation split and every training.
     address : str, optional
-        A running Ray cluster for the search; default a local instance.
+        A running Ray cluster: the study's cells run there as Ray tasks (files travel with them, so
+        the nodes need no shared folder), and so does the search; default: this machine.
     progress : bool
         Progress bars for data generation and training.
     callback : callable, optional
         ``callback(network_name, epoch, metrics)`` after every training epoch.
     echo : callable or None
         Prints one line per cell (default ``print``).
+    jobs : int
+        Cells run at once in local processes (default 1: in this process, in order); with
+        ``address``, tasks at once (default: the cluster's CPUs / threads).
+    device : {'auto', 'cpu', 'cuda'}
+        Where the networks train (:mod:`nnfmu.training.resources`).
+    threads : int, optional
+        Torch threads of each training (default: the budget's, one).
     """
     if isinstance(budget, str):
         budget = get_budget(system, budget)
     return Study(system, out, budget, data=data, tune=tune, seed=seed, address=address, progress=progress,
-                 callback=callback, echo=echo).run()
+                 callback=callback, echo=echo, jobs=jobs, device=device, threads=threads).run()

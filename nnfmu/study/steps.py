@@ -118,7 +118,8 @@ def _resumable(ckpt: Path, inputs: tuple[Path, ...], model_config, train_config)
 
 def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget: Budget, seed: int,
                   ckpt: Path, inputs: tuple[Path, ...], progress: bool,
-                  callback: Callable[[int, dict], None] | None) -> str:
+                  callback: Callable[[int, dict], None] | None, device: str = "auto",
+                  threads: int | None = None) -> str:
     """Train one network into ``ckpt``; resume it if an unfinished run of the same settings is there."""
     from nnfmu.training import train
 
@@ -134,7 +135,7 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
         ckpt.unlink(missing_ok=True)
     try:
         result = train(ds, model_config, train_config, out=ckpt, resume=resume, progress=progress,
-                       callback=callback)
+                       callback=callback, device=device, threads=threads)
     except TrainingError as exc:  # the checkpoint keeps the best weights before the failure
         write_text_atomic(error_file(ckpt), f"{exc}\n")
         return f"FAILED, best weights so far kept: {exc}"
@@ -179,10 +180,10 @@ def export_network(ckpt: Path, fmu: Path, name: str) -> str:
     return f"wrote {fmu.name}"
 
 
-def identify_baseline(data_dir: Path, options: dict, out: Path) -> str:
+def identify_baseline(data_dir: Path, options: dict, out: Path, progress: bool = False) -> str:
     from nnfmu.linear import identify_linear
 
-    model = identify_linear(load_dataset(data_dir), **options)
+    model = identify_linear(load_dataset(data_dir), progress=progress, **options)
     model.save(out)
     return f"order {model.n_x}, init '{model.init}'"
 

@@ -1,11 +1,17 @@
-"""Hyperparameter grid search on Ray Tune, as the paper did (``nnfmu tune`` and ``nnfmu reproduce --tune``).
+"""Hyperparameter search on Ray Tune (``nnfmu tune`` and ``nnfmu reproduce --tune``).
 
 Every trial trains one network with :func:`nnfmu.training.train` and reports
 the validation free-run NRMSE to Tune after every epoch (the metric early
 stopping uses too). The grid spans a few fields of :class:`~nnfmu.study.Hyper`
-around an architecture's base configuration; every grid point is repeated
-``samples`` times with different training seeds, and the point with the lowest
-mean best-validation NRMSE wins.
+around an architecture's base configuration. With the ``grid`` search (the
+paper's) every grid point is repeated ``samples`` times with different
+training seeds; with ``optuna`` or ``hyperopt`` (Ray Tune's integrations, the
+optional extra ``search``) that algorithm picks ``trials`` points among the
+grid's values, seeded. The ``asha`` scheduler stops trials early whose
+validation NRMSE trails the others' at the same epoch (asynchronous successive
+halving). Each trial gets ``cpus_per_trial`` CPUs (and as many torch threads)
+and ``gpus_per_trial`` GPUs (a fraction shares one; with any, it trains on CUDA).
+The point with the lowest mean best-validation NRMSE wins.
 
 Ray is the optional extra ``tune`` (``pip install "nnfmu[tune]"``, or
 ``pip install "ray[tune]"``). By default a local Ray instance is started
@@ -17,12 +23,12 @@ store, so no shared file system is needed for the data.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import itertools
 import json
 import math
 import os
+import importlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -33,26 +39,15 @@ from nnfmu.data import Dataset
 from nnfmu.errors import ConfigError, NnfmuError, TrainingError
 from nnfmu.study.budgets import Hyper
 from nnfmu.atomic import write_text_atomic
+from nnfmu.study.ray_connect import MissingExtraError, ray_session, require_ray
 from nnfmu.training import STRATEGIES
 
 METRIC = "best_valid_nrmse"
-
-
-class MissingExtraError(NnfmuError, ImportError):
-    """An optional dependency (an extra of the nnfmu package) is not installed."""
-
-
-def require_ray():
-    """Import Ray Tune, or raise :class:`MissingExtraError` naming the extra to install."""
-    try:
-        import ray
-        from ray import tune
-    except ImportError as exc:
-        raise MissingExtraError(
-            f"hyperparameter search needs Ray Tune, which is not installed ({exc}); install the optional extra "
-            "with: pip install \"nnfmu[tune]\" (or pip install \"ray[tune]\")"
-        ) from exc
-    return ray, tune
+SEARCHES = ("grid", "optuna", "hyperopt")
+SCHEDULERS = ("fifo", "asha")
+# search algorithm -> (module of Ray Tune's integration, class, the package it needs)
+_SEARCHERS = {"optuna": ("ray.tune.search.optuna", "OptunaSearch", "optuna"),
+              "hyperopt": ("ray.tune.search.hyperopt", "HyperOptSearch", "hyperopt")}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,8 +61,19 @@ class TuneSettings:
     max_minutes : float or None
         Wall-clock cap of one trial, in minutes.
     samples : int
-        Repetitions of every grid point, with training seeds ``seed, seed + 1, ...``.
+        Repetitions of every grid point, with training seeds ``seed, seed + 1, ...`` (grid search).
     seed : int
+        Training seed (of the first repetition), and the search algorithm's seed.
+    search : {'grid', 'optuna', 'hyperopt'}
+        Every grid point, or a search algorithm choosing among the grid's values.
+    trials : int or None
+        Trials of a search algorithm (default: as many as the grid has points).
+    scheduler : {'fifo', 'asha'}
+        Run every trial to its end, or stop the trailing ones early (ASHA).
+    grace_epochs : int
+        ASHA: epochs every trial runs before it may be stopped.
+    cpus_per_trial, gpus_per_trial : float
+        Resources Ray reserves for one trial; a GPU fraction lets trials share a GPU.
     """
 
     epochs: int = 10
@@ -75,10 +81,35 @@ class TuneSettings:
     max_minutes: float | None = None
     samples: int = 1
     seed: int = 0
+    search: str = "grid"
+    trials: int | None = None
+    scheduler: str = "fifo"
+    grace_epochs: int = 1
+    cpus_per_trial: float = 1.0
+    gpus_per_trial: float = 0.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.samples, int) or self.samples < 1:
-            raise ConfigError(f"samples must be an integer >= 1, got {self.samples!r}")
+        for name, low in (("samples", 1), ("grace_epochs", 1)):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < low:
+                raise ConfigError(f"{name} must be an integer >= {low}, got {getattr(self, name)!r}")
+        if self.trials is not None and (not isinstance(self.trials, int) or self.trials < 1):
+            raise ConfigError(f"trials must be None or an integer >= 1, got {self.trials!r}")
+        for name, allowed in (("search", SEARCHES), ("scheduler", SCHEDULERS)):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(allowed)}")
+        if not (isinstance(self.cpus_per_trial, (int, float)) and self.cpus_per_trial >= 1):
+            raise ConfigError(f"cpus_per_trial must be >= 1, got {self.cpus_per_trial!r}")
+        if not (isinstance(self.gpus_per_trial, (int, float)) and self.gpus_per_trial >= 0):
+            raise ConfigError(f"gpus_per_trial must be >= 0 (a fraction shares a GPU), got {self.gpus_per_trial!r}")
+
+    @property
+    def threads(self) -> int:
+        """Torch threads of one trial: its whole CPUs."""
+        return max(1, int(self.cpus_per_trial))
+
+    @property
+    def device(self) -> str:
+        return "cuda" if self.gpus_per_trial > 0 else "cpu"
 
 
 @dataclass(frozen=True)
@@ -139,24 +170,24 @@ def check_grid(arch: str, base: Hyper, grid: Mapping[str, Sequence], n_u: int, n
 
 def _trial(config: dict, dataset: Dataset | None = None, job: dict | None = None) -> None:
     """One Ray Tune trial: train with the grid point's hyperparameters, report every epoch."""
-    import torch
     from ray import tune
 
     from nnfmu.training import train
 
-    torch.set_num_threads(1)  # one CPU per trial
     point = {k: v for k, v in config.items() if k != "repeat"}
     hyper = Hyper.from_dict(job["base"]).replace(**point)
     settings = TuneSettings(**job["settings"])
     train_config = hyper.train_config(strategy=job["strategy"], epochs=settings.epochs, patience=settings.patience,
-                                      seed=settings.seed + int(config["repeat"]), max_minutes=settings.max_minutes)
+                                      seed=settings.seed + int(config.get("repeat", 0)),
+                                      max_minutes=settings.max_minutes)
 
     def report(epoch: int, metrics: dict) -> None:
         tune.report({"epoch": epoch, "valid_nrmse": _finite(metrics["valid_nrmse"]),
                      METRIC: _finite(metrics["best_valid_nrmse"])})
 
     try:
-        train(dataset, hyper.model_config(job["arch"], dataset.n_u, dataset.n_y), train_config, callback=report)
+        train(dataset, hyper.model_config(job["arch"], dataset.n_u, dataset.n_y), train_config, callback=report,
+              device=settings.device, threads=settings.threads)
     except TrainingError:  # a diverging configuration is a bad score, not a failed search
         tune.report({"epoch": 0, "valid_nrmse": math.inf, METRIC: math.inf})
 
@@ -165,29 +196,11 @@ def _finite(x: float) -> float:
     return float(x) if math.isfinite(x) else math.inf
 
 
-@contextlib.contextmanager
-def ray_session(address: str | None = None, num_cpus: int | None = None):
-    """Connect to the cluster at ``address`` or start a local Ray instance; stop what was started here."""
-    ray, _ = require_ray()
-    started = False
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False, log_to_driver=False)
-        started = True
-    try:
-        yield ray
-    finally:
-        if started:
-            ray.shutdown()
-
-
 def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel", base: Hyper | None = None,
                       grid: Mapping[str, Sequence] | None = None, settings: TuneSettings | None = None,
                       address: str | None = None, num_cpus: int | None = None,
                       storage: str | os.PathLike | None = None, progress: bool = False) -> TuneResult:
-    """Grid-search the hyperparameters of ``arch`` trained with ``strategy`` on Ray Tune.
+    """Search the hyperparameters of ``arch`` trained with ``strategy`` on Ray Tune (see the module docstring).
 
     Parameters
     ----------
@@ -198,11 +211,11 @@ def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel"
     grid : mapping field -> values
         E.g. ``{"hidden": (16, 32), "lr": (1e-3, 3e-3)}``; empty: only the base configuration.
     settings : TuneSettings
-        Trial length, repetitions and seed.
+        Trial length, repetitions, seed, search algorithm, scheduler and resources per trial.
     address : str, optional
         Address of a running Ray cluster (``ray start --head`` prints it); default: a local instance.
     num_cpus : int, optional
-        CPUs of the local instance (default: all); each trial takes one.
+        CPUs of the local instance (default: all); each trial takes ``settings.cpus_per_trial``.
     storage : path, optional
         Folder for Ray's trial records (default ``~/ray_results``); on a cluster, a shared one.
     """
@@ -211,24 +224,59 @@ def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel"
         raise ConfigError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
     base, grid, settings = base or Hyper(), dict(grid or {}), settings or TuneSettings()
     check_grid(arch, base, grid, dataset.n_u, dataset.n_y)
-    space = {k: tune.grid_search(list(v)) for k, v in grid.items()}
-    space["repeat"] = tune.grid_search(list(range(settings.samples)))
     job = {"arch": arch, "strategy": strategy, "base": base.to_dict(), "settings": dataclasses.asdict(settings)}
-    trainable = tune.with_resources(tune.with_parameters(_trial, dataset=dataset, job=job), {"cpu": 1})
+    resources = {"cpu": settings.cpus_per_trial, "gpu": settings.gpus_per_trial}
+    trainable = tune.with_resources(tune.with_parameters(_trial, dataset=dataset, job=job), resources)
     run_config = tune.RunConfig(name=f"nnfmu-{arch}-{strategy}", verbose=1 if progress else 0,
                                 storage_path=None if storage is None else str(Path(storage).resolve()))
-    with ray_session(address, num_cpus):
-        results = tune.Tuner(trainable, param_space=space, run_config=run_config,
-                             tune_config=tune.TuneConfig(metric=METRIC, mode="min", reuse_actors=True)).fit()
+    space, tune_config = _search(tune, grid, settings)
+    with ray_session(address, num_cpus, num_gpus=None if address else _local_gpus(settings)):
+        results = tune.Tuner(trainable, param_space=space, run_config=run_config, tune_config=tune_config).fit()
         trials = [_trial_row(r, grid) for r in results]
     return _best(arch, strategy, base, grid, trials, ray.__version__)
+
+
+def _search(tune, grid: Mapping[str, Sequence], settings: TuneSettings) -> tuple[dict, object]:
+    """The parameter space and the TuneConfig (search algorithm, scheduler, number of trials)."""
+    scheduler = None
+    if settings.scheduler == "asha":
+        from ray.tune.schedulers import ASHAScheduler
+
+        scheduler = ASHAScheduler(time_attr="epoch", max_t=settings.epochs,
+                                  grace_period=min(settings.grace_epochs, settings.epochs), reduction_factor=2)
+    if settings.search == "grid":
+        space = {k: tune.grid_search(list(v)) for k, v in grid.items()}
+        space["repeat"] = tune.grid_search(list(range(settings.samples)))
+        return space, tune.TuneConfig(metric=METRIC, mode="min", reuse_actors=True, scheduler=scheduler)
+    if not grid:
+        raise ConfigError(f"the {settings.search} search needs a grid of at least one field to choose from, "
+                          "e.g. --grid hidden=16,32 lr=0.001,0.003")
+    module, name, package = _SEARCHERS[settings.search]
+    try:
+        searcher_class = getattr(importlib.import_module(module), name)
+        seeded = ({"sampler": importlib.import_module("optuna").samplers.TPESampler(seed=settings.seed)}
+                  if settings.search == "optuna" else {"random_state_seed": settings.seed})
+        searcher = searcher_class(**seeded)
+    except (ImportError, AssertionError) as exc:  # Ray's integrations assert that their package is there
+        raise MissingExtraError(f"the {settings.search} search needs {package}, which is not installed ({exc}); "
+                                f"install the optional extra with: pip install \"nnfmu[search]\" "
+                                f"(or pip install {package})") from exc
+    space = {k: tune.choice(list(v)) for k, v in grid.items()}
+    trials = settings.trials or len(grid_points(grid))
+    return space, tune.TuneConfig(metric=METRIC, mode="min", reuse_actors=True, scheduler=scheduler,
+                                  search_alg=searcher, num_samples=trials)
+
+
+def _local_gpus(settings: TuneSettings) -> float | None:
+    """GPUs of a local Ray instance: none unless trials ask for them (then Ray detects them)."""
+    return None if settings.gpus_per_trial > 0 else 0
 
 
 def _trial_row(result, grid: Mapping) -> dict:
     metrics = result.metrics or {}
     score = metrics.get(METRIC, math.inf)
     row = {k: result.config[k] for k in sorted(grid)}
-    row.update(repeat=int(result.config["repeat"]), best_valid_nrmse=_finite_or_none(_finite(score)),
+    row.update(repeat=int(result.config.get("repeat", 0)), best_valid_nrmse=_finite_or_none(_finite(score)),
                epochs=int(metrics.get("epoch", 0)), error=None if result.error is None else str(result.error))
     return row
 

@@ -76,4 +76,5 @@ class WeightAverage:
 
     def load_state_dict(self, state: dict) -> None:
         self.count = int(state["count"])
-        self.params = {k: v.clone() for k, v in state["params"].items()}
+        devices = {k: p.device for k, p in self.model.named_parameters()}
+        self.params = {k: v.to(devices[k]).clone() for k, v in state["params"].items()}

@@ -63,7 +63,7 @@ def _pad(seqs: list) -> Batch:
     # pad by repeating the last sample: finite, in range, and masked out of the loss
     un = torch.stack([torch.cat([u, u[-1:].expand(T - len(u), -1)]) for u, _ in seqs])
     yn = torch.stack([torch.cat([y, y[-1:].expand(T - len(y), -1)]) for _, y in seqs])
-    mask = torch.arange(T)[None, :] < torch.tensor(lengths)[:, None]
+    mask = torch.arange(T, device=un.device)[None, :] < torch.tensor(lengths, device=un.device)[:, None]
     return Batch(un, yn, mask)
 
 

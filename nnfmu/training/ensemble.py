@@ -25,7 +25,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from nnfmu.data import Dataset, save_dataset
 from nnfmu.errors import CheckpointError, ConfigError, TrainingError
@@ -108,20 +107,21 @@ def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> st
     return "finished" if done else "unfinished"
 
 
-def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool) -> str:
+def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
+               device="auto", threads: int | None = None) -> str:
     """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
-    torch.set_num_threads(1)
     state = _member_state(path, model_config, cfg)
     if state == "finished":
         return "done"
     try:
-        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress).stop_reason
+        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress,
+                     device=device, threads=threads).stop_reason
     except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
         _error_file(path).write_text(f"{exc}\n")
         return "failed"
 
 
-def _train_in_processes(work: list, jobs: int) -> None:
+def _train_in_processes(work: list, jobs: int, device, threads: int | None) -> None:
     """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
 
     Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard.
@@ -135,7 +135,8 @@ def _train_in_processes(work: list, jobs: int) -> None:
             while pending and len(running) < jobs:
                 _, model_config, cfg, path, _ = pending.pop(0)
                 args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
-                        json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path)]
+                        json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
+                        str(threads or 1)]
                 running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
                                                        stderr=subprocess.PIPE, text=True)))
             path, proc = running.pop(0)
@@ -157,7 +158,7 @@ def _jobs(jobs: int | None, k: int) -> int:
 
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
                 seeds: int = 3, keep: str = "ensemble", out: str | os.PathLike, jobs: int | None = None,
-                progress: bool = False) -> SeedsResult:
+                progress: bool = False, device="auto", threads: int | None = None) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
 
     Parameters
@@ -177,6 +178,8 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
         Processes training at once (default: the cores this process may use, at most K).
     progress : bool
         Progress bars (only with ``jobs=1``).
+    device, threads :
+        As in :func:`train`, for every seed.
     """
     if keep not in KEEP:
         raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
@@ -194,12 +197,12 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     n_jobs = _jobs(jobs, seeds)
     if n_jobs == 1:
         for item in work:
-            if _train_one(*item) in ("SIGINT", "SIGTERM"):
+            if _train_one(*item, device=device, threads=threads) in ("SIGINT", "SIGTERM"):
                 break
     else:
         for _, mc, c, path, _ in work:  # settings clashes are reported here, before any process starts
             _member_state(path, mc, c)
-        _train_in_processes(work, n_jobs)
+        _train_in_processes(work, n_jobs, device, threads)
     if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
         raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
                                 f"ones' checkpoints are in {paths[0].parent}: run the same call again to continue")

@@ -9,12 +9,14 @@ import torch
 
 from nnfmu.data import Trajectories
 from nnfmu.metrics import NrmseResult, nrmse
-from nnfmu.models.base import StepModel
+from nnfmu.models.base import StepModel, torch_threads
+from nnfmu.training.resources import check_threads
 
 _EVAL_BATCH = 1024
 
 
-def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False, context: int = 1) -> list[np.ndarray]:
+def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False, context: int = 1,
+             threads: int | None = None) -> list[np.ndarray]:
     """Free-run predictions ``[(n_i - context + 1, n_y), ...]`` in physical units for every trajectory of ``traj``.
 
     Each trajectory starts from its measured ``y[context - 1]``; with ``context = N > 1`` the
@@ -22,10 +24,11 @@ def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False, con
     or the model must have none, which then starts from ``y[N - 1]`` alone). Trajectories of equal
     length are simulated together in batches. With ``float64`` a float64 copy
     of the model runs (as :meth:`StepModel.simulate` does); otherwise the model
-    runs in its own dtype. The model's train/eval mode is left unchanged.
+    runs in its own dtype, on the model's device, on ``threads`` intra-op threads (default one:
+    :mod:`nnfmu.training.resources`). The model's train/eval mode is left unchanged.
     """
     runner = copy.deepcopy(model).double() if float64 else model
-    dtype = runner.u_mean.dtype
+    dtype, device = runner.u_mean.dtype, runner.u_mean.device
     was_training = runner.training
     runner.eval()
     preds: list = [None] * traj.n_traj
@@ -33,16 +36,16 @@ def free_run(model: StepModel, traj: Trajectories, *, float64: bool = False, con
     for i, n in enumerate(traj.lengths.tolist()):
         by_length.setdefault(n, []).append(i)
     try:
-        with torch.no_grad():
+        with torch.no_grad(), torch_threads(check_threads(threads)):
             for index in by_length.values():
                 for start in range(0, len(index), _EVAL_BATCH):
                     chunk = index[start:start + _EVAL_BATCH]
-                    u = torch.as_tensor(np.stack([traj.u[i] for i in chunk]), dtype=dtype)
-                    y = torch.as_tensor(np.stack([traj.y[i] for i in chunk]), dtype=dtype)
+                    u = torch.as_tensor(np.stack([traj.u[i] for i in chunk]), dtype=dtype, device=device)
+                    y = torch.as_tensor(np.stack([traj.y[i] for i in chunk]), dtype=dtype, device=device)
                     past = {}
                     if context > 1 and runner.config.init_window > 1:
                         past = {"y_past": y[:, :context - 1], "u_past": u[:, :context - 1]}
-                    y = runner(u[:, context - 1:], y[:, context - 1], **past).double().numpy()
+                    y = runner(u[:, context - 1:], y[:, context - 1], **past).double().cpu().numpy()
                     for j, i in enumerate(chunk):
                         preds[i] = y[j]
     finally:

@@ -1,4 +1,6 @@
-"""``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt``: one seed of :func:`train_seeds`.
+"""``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt DEVICE THREADS``: one seed.
+
+One seed of :func:`nnfmu.training.train_seeds`.
 
 Runs in a fresh interpreter so that :func:`nnfmu.training.train_seeds` can train seeds side by side
 without ``multiprocessing`` (which would re-run the caller's script). The dataset is a dataset
@@ -18,9 +20,9 @@ from nnfmu.training.ensemble import _train_one
 
 
 def main(argv: list[str]) -> int:
-    data, model_json, train_json, out = argv
-    _train_one(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)), TrainConfig.from_dict(json.loads(train_json)),
-               Path(out), False)
+    data, model_json, train_json, out, device, threads = argv
+    _train_one(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
+               TrainConfig.from_dict(json.loads(train_json)), Path(out), False, device=device, threads=int(threads))
     return 0
 
 

@@ -24,6 +24,7 @@ from nnfmu.training.batches import epoch_batches, masked_mse
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
 from nnfmu.training.horizons import lr_factor, with_context
+from nnfmu.training.resources import cpu_state
 
 
 @contextlib.contextmanager
@@ -169,9 +170,9 @@ class Session:
 
     def resume_state(self) -> dict:
         return {"epoch": self.epoch, "state_dict": state_snapshot(self.model),
-                "optimizer": self.optimizer.state_dict(), "torch_rng": torch.get_rng_state(),
+                "optimizer": cpu_state(self.optimizer.state_dict()), "torch_rng": torch.get_rng_state(),
                 "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed,
-                "average": self.average.state_dict()}
+                "average": cpu_state(self.average.state_dict())}
 
     def restore(self, ckpt: dict) -> None:
         """Continue from a checkpoint written by :meth:`save` (its ``resume`` section)."""

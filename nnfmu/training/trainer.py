@@ -30,7 +30,7 @@ import torch
 from nnfmu.data import Dataset
 from nnfmu.errors import CheckpointError, ConfigError
 from nnfmu.metrics import NrmseResult
-from nnfmu.models.base import StepModel
+from nnfmu.models.base import StepModel, torch_threads
 from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.registry import build_model
@@ -40,7 +40,9 @@ from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import join_sequences, validation_trajectories
 from nnfmu.training.increments import prepare_increment
+from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
+from nnfmu.valid_range import training_range
 
 Callback = Callable[[int, dict], None]
 
@@ -88,11 +90,12 @@ class TrainResult:
 
 
 def dataset_meta(ds: Dataset, arch: str) -> dict:
-    """The model's ``meta``: name, Ts, channels and (JSON-clean) provenance of the dataset."""
+    """The model's ``meta``: name, Ts, channels, (JSON-clean) provenance and the training input range."""
     source = json.loads(json.dumps(dict(ds.source), default=_jsonable))
     system = source.get("system") or source.get("name") or source.get("kind") or "model"
     return {"name": f"{system}_{arch}", "Ts": float(ds.Ts), "inputs": [c.to_json() for c in ds.inputs],
-            "outputs": [c.to_json() for c in ds.outputs], "source": source}
+            "outputs": [c.to_json() for c in ds.outputs], "source": source,
+            "input_range": training_range(ds.train.u)}  # the FMU's valid input range (nnfmu.valid_range)
 
 
 def _jsonable(v):
@@ -160,6 +163,8 @@ def train(
     resume: bool = False,
     progress: bool = False,
     callback: Callback | None = None,
+    device: str | torch.device | None = "auto",
+    threads: int | None = None,
 ) -> TrainResult:
     """Train a step network in parallel or series-parallel mode; early stopping on validation free-run NRMSE.
 
@@ -181,6 +186,12 @@ def train(
         Show a tqdm bar with the loss and the validation NRMSE.
     callback : callable, optional
         ``callback(epoch, metrics)`` after every epoch; raise :class:`StopTraining` to stop.
+    device : {'auto', 'cpu', 'cuda'} or 'cuda:N'
+        Where to train (:func:`nnfmu.training.resources.resolve_device`); the returned model
+        is on the CPU and the checkpoint holds CPU tensors whatever the device.
+    threads : int, optional
+        Intra-op torch threads of this training (default one: the measured policy of
+        :mod:`nnfmu.training.resources`); the caller's setting is restored afterwards.
 
     Raises
     ------
@@ -201,11 +212,13 @@ def train(
     dataset, notes = _prepare(dataset, cfg)
     valid, valid_notes = validation_trajectories(dataset, cfg)
     notes += valid_notes
-    dtype = getattr(torch, cfg.dtype)
-    with torch.random.fork_rng(devices=[]), flush_denormals():
+    dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
+    with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
         model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
         model = model.to(dtype)
-        seqs = normalised_sequences(model, dataset.train, dtype, "train")
+        _check_device(model, device)
+        seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
+        model = model.to(device)
         session = Session(model, cfg, join_sequences(seqs) if cfg.join else seqs, valid, out)
         if ckpt:
             session.restore(ckpt)
@@ -219,6 +232,7 @@ def train(
             session.save({"test_nrmse": None if test is None else test.mean, "stop_reason": stop_reason,
                           "test_nrmse_window": None if test_window is None else test_window.mean,
                           "valid_samples": valid.n_samples, "notes": notes})
+    model = model.cpu()
     model.load_state_dict(session.best_state)
     model.eval()
     return TrainResult(model, session.history, session.best_epoch, session.best_score, test, stop_reason,
@@ -235,6 +249,12 @@ def _test_scores(model: StepModel, dataset: Dataset) -> tuple[NrmseResult | None
     n = model.config.init_window
     window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 else None
     return free_run_nrmse(model, dataset.test, float64=True), window
+
+
+def _check_device(model: StepModel, device: torch.device) -> None:
+    if device.type != "cpu" and getattr(model.config, "physics_backend", None) == "compiled":
+        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
+                          "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
 
 
 def _as_train_config(train_config) -> TrainConfig:

@@ -1,17 +1,28 @@
 /* nnfmu FMU core: everything the FMI 2 and FMI 3 entry points share.
  *
  * Hand-written once and reviewed; the model's maths lives in the CasADi-generated model_casadi.c
- * and its sizes and value references in the generated nnfmu_model.h. The core keeps no globals:
- * an instance owns all of its state, so several instances run side by side.
+ * and its sizes, value references, ranges and names in the generated nnfmu_model.h. The core keeps
+ * no mutable globals: an instance owns all of its state, so several instances run side by side.
+ * It owns the bookkeeping (time, samples, inputs held, the state machine, FMU states, logging);
+ * the FMI 2 and FMI 3 files only translate types and call it. The user-level reference is
+ * docs/fmu.md; in short:
  *
- * Behaviour (see nnfmu/export/fmu.py for the user-level description):
- * - doStep(t, h) needs h = n * Ts (n >= 1, relative tolerance 1e-9) and t on the FMU's own time;
- *   it advances n samples with the inputs held. Anything else is an error naming Ts.
- * - The state x0 = init(y0, u0, p) is computed at the first doStep, from the <y>_start parameters
- *   and the inputs set for that first step (importers set inputs right before doStep).
- *   Until then the outputs equal their <y>_start values.
- * - Non-finite inputs, parameters or results give an error status with a message; the instance
- *   then stays at its last good sample (the step is not committed), so it never crashes.
+ * - Time is counted in whole samples from the start time t0: sample k is at t0 + k * Ts. A
+ *   communication point counts as reaching a sample instant when it is at most a tolerance before
+ *   it; the tolerance is relative to the magnitude of the time (1e-9 of it, at most 1e-3 Ts, never
+ *   below 16 rounding units), so no drift accumulates however long the run.
+ * - doStep(t, h) accepts any h > 0: it advances every sample instant in (t, t + h]; the outputs are
+ *   those of the last sample reached, and a step that reaches none changes nothing. The sample from
+ *   t_k to t_k+1 uses the input that was held at t_k (set for the communication step containing t_k),
+ *   as a sampled system sees a held input. x0 = init(y0, u0, p) is computed when the first sample is
+ *   taken, from the <y>_start parameters and the input at t0; until then the outputs are y0.
+ * - A step that would take more than max_samples_per_step samples is refused at once.
+ * - Inputs outside their [min, max] give a Warning status (one message per excursion and input),
+ *   or an Error without taking the step when input_range_error is true.
+ * - Non-finite inputs, parameters or results give an Error; the step is not committed.
+ * - Calls the FMI 2.0 / 3.0 state machines do not allow in the current state return an Error, and
+ *   any Error puts the instance in the error state (reset, free, get or set an FMU state go on).
+ * - An FMU state holds everything above, the mode included: set into a fresh instance, it resumes.
  */
 #ifndef NNFMU_CORE_H
 #define NNFMU_CORE_H
@@ -26,6 +37,9 @@
 
 /* Same numbers as fmi2Status and fmi3Status. */
 typedef enum { NNFMU_OK = 0, NNFMU_WARNING = 1, NNFMU_DISCARD = 2, NNFMU_ERROR = 3, NNFMU_FATAL = 4 } nnfmu_status;
+
+/* The type an importer's getter or setter works on (fmi2Integer/fmi3Int32 and the Booleans). */
+typedef enum { NNFMU_INTEGER, NNFMU_BOOLEAN } nnfmu_int_type;
 
 /* The FMI-version-specific wrapper passes a function that forwards one finished message. */
 typedef void (*nnfmu_log_sink)(void *env, const char *instance_name, nnfmu_status status,
@@ -45,15 +59,20 @@ NNFMU_INTERNAL nnfmu_status nnfmu_terminate(nnfmu_instance *inst, const char *ca
 NNFMU_INTERNAL nnfmu_status nnfmu_reset(nnfmu_instance *inst);
 
 /* Variables, one value reference at a time (the wrappers loop; their VR types differ). */
-NNFMU_INTERNAL nnfmu_status nnfmu_get(nnfmu_instance *inst, const char *caller, unsigned long vr, double *value);
-NNFMU_INTERNAL nnfmu_status nnfmu_set(nnfmu_instance *inst, const char *caller, unsigned long vr, double value);
+NNFMU_INTERNAL nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double *value);
+NNFMU_INTERNAL nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double value);
+NNFMU_INTERNAL nnfmu_status nnfmu_get_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type,
+                                          unsigned long vr, long long *value);
+NNFMU_INTERNAL nnfmu_status nnfmu_set_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type,
+                                          unsigned long vr, long long value);
 NNFMU_INTERNAL int nnfmu_is_output(unsigned long vr);
 
-/* Co-simulation step; nnfmu_time is the FMU's time (start time + samples * Ts), in s. */
+/* Co-simulation step, and the time it reached (the last communication point, in s). */
 NNFMU_INTERNAL nnfmu_status nnfmu_do_step(nnfmu_instance *inst, const char *caller, double t, double h);
+NNFMU_INTERNAL nnfmu_status nnfmu_last_time(nnfmu_instance *inst, const char *caller, double *time);
 NNFMU_INTERNAL double nnfmu_time(const nnfmu_instance *inst);
 
-/* FMU state: an opaque snapshot of time, inputs, parameters, outputs and the model state x. */
+/* FMU state: an opaque snapshot of the mode, time, inputs, parameters, outputs and model state x. */
 NNFMU_INTERNAL nnfmu_status nnfmu_get_state(nnfmu_instance *inst, void **state);
 NNFMU_INTERNAL nnfmu_status nnfmu_set_state(nnfmu_instance *inst, const void *state);
 NNFMU_INTERNAL void nnfmu_free_state(void **state);
@@ -62,8 +81,8 @@ NNFMU_INTERNAL nnfmu_status nnfmu_serialize(nnfmu_instance *inst, const void *st
 NNFMU_INTERNAL nnfmu_status nnfmu_deserialize(nnfmu_instance *inst, const unsigned char *bytes, size_t size,
                                               void **state);
 
-/* Log through the instance (errors always; others only with logging on); returns `status`. */
-NNFMU_INTERNAL nnfmu_status nnfmu_log(nnfmu_instance *inst, nnfmu_status status, const char *fmt, ...);
+/* An Error: log it (always) and put the instance in the error state; returns NNFMU_ERROR. */
+NNFMU_INTERNAL nnfmu_status nnfmu_error(nnfmu_instance *inst, const char *fmt, ...);
 /* Log before an instance exists (wrong token, unsupported interface type). */
 NNFMU_INTERNAL void nnfmu_log_early(nnfmu_log_sink sink, void *env, const char *instance_name, const char *fmt, ...);
 

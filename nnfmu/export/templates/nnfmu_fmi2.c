@@ -1,5 +1,5 @@
-/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
- * Only Real variables exist; the other types accept empty requests and reject the rest. */
+/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
+ * FMI 2 types and calls the core, which checks the state machine and does the work. */
 #include <stddef.h>
 #include <stdlib.h>
 
@@ -105,7 +105,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   size_t i;
   CHECK_INSTANCE();
   for (i = 0; i < nvr; ++i)
-    if (nnfmu_get(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
+    if (nnfmu_get_real(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
 }
 
@@ -113,40 +113,59 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   size_t i;
   CHECK_INSTANCE();
   for (i = 0; i < nvr; ++i)
-    if (nnfmu_set(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+    if (nnfmu_set_real(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
 }
 
-/* Integer, Boolean and String: this FMU has none. */
-static fmi2Status no_such_type(fmi2Component c, const char *caller, size_t nvr) {
+/* Integer and Boolean: the parameters max_samples_per_step and input_range_error. */
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+  size_t i;
+  long long v;
   CHECK_INSTANCE();
-  if (nvr == 0) return fmi2OK;
-  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s: this FMU has Real variables only", caller);
+  for (i = 0; i < nvr; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi2GetInteger", NNFMU_INTEGER, vr[i], &v) != NNFMU_OK) return fmi2Error;
+    value[i] = (fmi2Integer)v;
+  }
+  return fmi2OK;
 }
 
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetInteger", nvr);
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi2SetInteger", NNFMU_INTEGER, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
 }
+
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetBoolean", nvr);
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi2GetBoolean", NNFMU_BOOLEAN, vr[i], &v) != NNFMU_OK) return fmi2Error;
+    value[i] = v ? fmi2True : fmi2False;
+  }
+  return fmi2OK;
 }
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi2SetBoolean", NNFMU_BOOLEAN, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
+}
+
+/* String: this FMU has none. */
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
   (void)vr; (void)value;
-  return no_such_type(c, "fmi2GetString", nvr);
-}
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetInteger", nvr);
-}
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
-  (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetBoolean", nvr);
+  CHECK_INSTANCE();
+  return nvr ? (fmi2Status)nnfmu_error(INSTANCE, "fmi2GetString: this FMU has no String variables") : fmi2OK;
 }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
   (void)vr; (void)value;
-  return no_such_type(c, "fmi2SetString", nvr);
+  CHECK_INSTANCE();
+  return nvr ? (fmi2Status)nnfmu_error(INSTANCE, "fmi2SetString: this FMU has no String variables") : fmi2OK;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
@@ -180,7 +199,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 
 static fmi2Status unsupported(fmi2Component c, const char *caller, const char *why) {
   CHECK_INSTANCE();
-  return (fmi2Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+  return (fmi2Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
@@ -224,8 +243,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
   CHECK_INSTANCE();
   if (s != fmi2LastSuccessfulTime) return unsupported(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime exists");
-  *value = nnfmu_time(INSTANCE);
-  return fmi2OK;
+  return (fmi2Status)nnfmu_last_time(INSTANCE, "fmi2GetRealStatus", value);
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {

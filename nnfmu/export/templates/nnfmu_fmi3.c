@@ -1,6 +1,7 @@
-/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.c).
- * Only Float64 variables exist, there is no event mode and no model exchange. Every FMI 3 function is
- * exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
+/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
+ * FMI 3 types and calls the core, which checks the state machine and does the work. There is no event
+ * mode and no model exchange. Every FMI 3 function is exported (importers look them all up); those
+ * that do not apply are in nnfmu_fmi3_unsupported.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
@@ -15,7 +16,7 @@ static void fmi3_sink(void *env, const char *instance_name, nnfmu_status status,
 
 fmi3Status nnfmu_fmi3_unsupported(fmi3Instance instance, const char *caller, const char *why) {
   CHECK_INSTANCE();
-  return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "%s is not supported: %s", caller, why);
+  return (fmi3Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
 
 
@@ -117,16 +118,20 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
   return (fmi3Status)nnfmu_reset(INSTANCE);
 }
 
+/* Every variable is a scalar: the value count must equal the value-reference count. */
+static fmi3Status check_count(fmi3Instance instance, const char *caller, size_t n_refs, size_t n_values) {
+  if (n_values == n_refs) return fmi3OK;
+  return (fmi3Status)nnfmu_error(INSTANCE, "%s: expected nValues = nValueReferences = %lu (all variables are "
+                                 "scalars), got %lu", caller, (unsigned long)n_refs, (unsigned long)n_values);
+}
+
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                           fmi3Float64 values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
-  if (nValues != nValueReferences)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetFloat64: expected nValues = nValueReferences "
-                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
-                                 (unsigned long)nValues);
+  if (check_count(instance, "fmi3GetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_get(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
+    if (nnfmu_get_real(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
   return fmi3OK;
 }
 
@@ -134,12 +139,58 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Float64 values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
-  if (nValues != nValueReferences)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3SetFloat64: expected nValues = nValueReferences "
-                                 "= %lu (all variables are scalars), got %lu", (unsigned long)nValueReferences,
-                                 (unsigned long)nValues);
+  if (check_count(instance, "fmi3SetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_set(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+    if (nnfmu_set_real(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+  return fmi3OK;
+}
+
+/* Int32 and Boolean: the parameters max_samples_per_step and input_range_error. */
+fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Int32 values[], size_t nValues) {
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3GetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi3GetInt32", NNFMU_INTEGER, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
+    values[i] = (fmi3Int32)v;
+  }
+  return fmi3OK;
+}
+
+fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Int32 values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3SetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi3SetInt32", NNFMU_INTEGER, valueReferences[i], values[i]) != NNFMU_OK)
+      return fmi3Error;
+  return fmi3OK;
+}
+
+fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          fmi3Boolean values[], size_t nValues) {
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3GetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i) {
+    if (nnfmu_get_int(INSTANCE, "fmi3GetBoolean", NNFMU_BOOLEAN, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
+    values[i] = v ? fmi3True : fmi3False;
+  }
+  return fmi3OK;
+}
+
+fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                          const fmi3Boolean values[], size_t nValues) {
+  size_t i;
+  CHECK_INSTANCE();
+  if (check_count(instance, "fmi3SetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
+  for (i = 0; i < nValueReferences; ++i)
+    if (nnfmu_set_int(INSTANCE, "fmi3SetBoolean", NNFMU_BOOLEAN, valueReferences[i], values[i]) != NNFMU_OK)
+      return fmi3Error;
   return fmi3OK;
 }
 
@@ -156,22 +207,18 @@ NO_VARIABLES_OF_TYPE(fmi3GetInt8, fmi3Int8)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt8, fmi3UInt8)
 NO_VARIABLES_OF_TYPE(fmi3GetInt16, fmi3Int16)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt16, fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3GetInt32, fmi3Int32)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt32, fmi3UInt32)
 NO_VARIABLES_OF_TYPE(fmi3GetInt64, fmi3Int64)
 NO_VARIABLES_OF_TYPE(fmi3GetUInt64, fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3GetBoolean, fmi3Boolean)
 NO_VARIABLES_OF_TYPE(fmi3GetString, fmi3String)
 NO_VARIABLES_OF_TYPE(fmi3SetFloat32, const fmi3Float32)
 NO_VARIABLES_OF_TYPE(fmi3SetInt8, const fmi3Int8)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt8, const fmi3UInt8)
 NO_VARIABLES_OF_TYPE(fmi3SetInt16, const fmi3Int16)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt16, const fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3SetInt32, const fmi3Int32)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt32, const fmi3UInt32)
 NO_VARIABLES_OF_TYPE(fmi3SetInt64, const fmi3Int64)
 NO_VARIABLES_OF_TYPE(fmi3SetUInt64, const fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3SetBoolean, const fmi3Boolean)
 NO_VARIABLES_OF_TYPE(fmi3SetString, const fmi3String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
@@ -207,7 +254,7 @@ fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueR
                                                size_t *nDependencies) {
   CHECK_INSTANCE();
   if (!nnfmu_is_output(valueReference))
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetNumberOfVariableDependencies: value reference %lu "
+    return (fmi3Status)nnfmu_error(INSTANCE, "fmi3GetNumberOfVariableDependencies: value reference %lu "
                                  "is not an output", (unsigned long)valueReference);
   *nDependencies = 0;
   return fmi3OK;
@@ -220,7 +267,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
   (void)elementIndicesOfDependent; (void)independents; (void)elementIndicesOfIndependents; (void)dependencyKinds;
   CHECK_INSTANCE();
   if (!nnfmu_is_output(dependent) || nDependencies != 0)
-    return (fmi3Status)nnfmu_log(INSTANCE, NNFMU_ERROR, "fmi3GetVariableDependencies: expected an output and "
+    return (fmi3Status)nnfmu_error(INSTANCE, "fmi3GetVariableDependencies: expected an output and "
                                  "nDependencies = 0, got value reference %lu and %lu", (unsigned long)dependent,
                                  (unsigned long)nDependencies);
   return fmi3OK;

@@ -21,7 +21,7 @@ typedef struct {
 
 #define NO_MX "this FMU is for co-simulation only"
 #define NO_CLOCKS "this FMU has no clocks and no event mode"
-#define NO_TYPE "this FMU has Float64 variables only"
+#define NO_TYPE "this FMU has Float64, Int32 and Boolean variables only"
 
 /* Log "<caller> is not supported: <why>" and return fmi3Error. */
 NNFMU_INTERNAL fmi3Status nnfmu_fmi3_unsupported(fmi3Instance instance, const char *caller, const char *why);

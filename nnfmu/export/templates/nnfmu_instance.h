@@ -1,0 +1,61 @@
+/* nnfmu FMU core, internal: the instance and what nnfmu_core.c, nnfmu_step.c and nnfmu_state.c share.
+ * The FMI wrappers never see this header; they talk to the core through nnfmu_core.h. */
+#ifndef NNFMU_INSTANCE_H
+#define NNFMU_INSTANCE_H
+
+#include "nnfmu_core.h"
+#include "nnfmu_model.h"
+#include "model_casadi.h"
+
+#define NNFMU_ALLOC(n) ((n) > 0 ? (n) : 1) /* C has no empty arrays */
+
+/* The FMI modes as bit flags, so that a call names the set of modes it is allowed in. */
+typedef enum {
+  MODE_INSTANTIATED = 1,
+  MODE_INITIALIZATION = 2,
+  MODE_STEP = 4,
+  MODE_TERMINATED = 8,
+  MODE_ERROR = 16
+} nnfmu_mode;
+#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR)
+
+/* Everything that changes while simulating: exactly what an FMU state snapshot holds. */
+typedef struct {
+  nnfmu_mode mode;
+  double start_time;  /* t0, s */
+  double time;        /* the communication point reached by the last doStep (t0 before any), s */
+  long long samples;  /* sample instants t0 + k Ts reached, k = 1 .. samples */
+  int x_ready;        /* x holds init(y0, u0, p) or a later state */
+  long long max_samples; /* parameter max_samples_per_step */
+  int range_error;       /* parameter input_range_error: out-of-range inputs are an Error */
+  double u[NNFMU_ALLOC(NNFMU_NU)];        /* inputs as set by the importer */
+  double u_sample[NNFMU_ALLOC(NNFMU_NU)]; /* the input held at the instant of the last sample reached */
+  unsigned char outside[NNFMU_ALLOC(NNFMU_NU)]; /* input i is in an excursion outside [min, max] */
+  double y[NNFMU_ALLOC(NNFMU_NY)]; /* outputs after the last sample (before any: the <y>_start values) */
+  double y_start[NNFMU_ALLOC(NNFMU_NY)];
+  double p[NNFMU_ALLOC(NNFMU_NP)];
+  double x[NNFMU_ALLOC(NNFMU_NX)];
+} nnfmu_values;
+
+struct nnfmu_instance {
+  char *name;
+  nnfmu_log_sink sink;
+  void *env;
+  int logging_on;
+  nnfmu_values v;
+  double xa[NNFMU_ALLOC(NNFMU_NX)], xb[NNFMU_ALLOC(NNFMU_NX)], y_next[NNFMU_ALLOC(NNFMU_NY)]; /* step scratch */
+  const casadi_real **arg; /* CasADi's work arrays, sized by the generated *_work functions */
+  casadi_real **res;
+  casadi_int *iw;
+  casadi_real *w;
+  char message[1024];
+};
+
+/* Log a message of any status (Errors and Warnings always, OK only with logging on); returns status. */
+NNFMU_INTERNAL nnfmu_status nnfmu_log(nnfmu_instance *inst, nnfmu_status status, const char *fmt, ...);
+/* NNFMU_OK if the instance is in one of `modes`; otherwise an Error that names the mode and the allowed ones. */
+NNFMU_INTERNAL nnfmu_status nnfmu_require(nnfmu_instance *inst, const char *caller, int modes);
+/* The values of a freshly instantiated (or reset) instance. */
+NNFMU_INTERNAL void nnfmu_start_values(nnfmu_values *v);
+
+#endif /* NNFMU_INSTANCE_H */

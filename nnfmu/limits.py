@@ -1,0 +1,56 @@
+"""Size limits checked before anything big is allocated, so that a typo gives one clear line.
+
+``nnfmu train --hidden 100000`` would ask for a 30-billion-parameter GRU
+(120 GB) and end in an allocation traceback deep inside torch. The command
+line checks sizes here first:
+
+- a network may have at most :data:`MAX_PARAMETERS` trainable parameters,
+  counted exactly by building it on torch's ``meta`` device (no memory);
+- ``--batch-size`` at most :data:`MAX_BATCH_SIZE` trajectories or windows;
+- ``nnfmu linear --order/--max-order`` at most :data:`MAX_LINEAR_ORDER` states;
+- ``nnfmu physics-fmu --n-sub`` at most :data:`MAX_RK4_SUBSTEPS` RK4 sub-steps per sample.
+
+The limits are far above what the paper's study uses (GRU-64: 13 k parameters)
+and what an FMU can hold in practice; the messages name them and the fix.
+"""
+
+from __future__ import annotations
+
+from nnfmu.errors import ConfigError
+
+MAX_PARAMETERS = 50_000_000
+MAX_BATCH_SIZE = 100_000
+MAX_LINEAR_ORDER = 200
+MAX_RK4_SUBSTEPS = 10_000
+
+
+def count_parameters(model_config, meta: dict | None = None) -> int:
+    """Trainable parameters of the network ``model_config`` describes, counted without allocating them."""
+    import torch
+
+    from nnfmu.models.registry import build_model
+
+    config = model_config
+    if getattr(config, "arch", None) == "hybrid":  # the compiled physics backend would compile C first
+        config = config.replace(physics_backend="sx")
+    with torch.device("meta"):
+        model = build_model(config, meta)
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+def check_network_size(model_config, meta: dict | None = None) -> int:
+    """Raise ConfigError if the network would exceed :data:`MAX_PARAMETERS`; return its parameter count."""
+    n = count_parameters(model_config, meta)
+    if n > MAX_PARAMETERS:
+        c = model_config
+        raise ConfigError(f"--hidden {c.hidden} with --layers {c.layers} gives a {c.arch.upper()} of {n:,} parameters "
+                          f"({n * 4 / 1e9:.3g} GB in float32), above nnfmu's limit of {MAX_PARAMETERS:,} "
+                          f"(nnfmu.limits.MAX_PARAMETERS); choose a smaller --hidden or --layers")
+    return n
+
+
+def check_at_most(option: str, value: int | None, limit: int, constant: str) -> None:
+    """Raise ConfigError if ``value`` (of command-line ``option``) exceeds ``limit``."""
+    if value is not None and value > limit:
+        raise ConfigError(f"{option} {value} is above nnfmu's limit of {limit:,} (nnfmu.limits.{constant}); "
+                          f"choose a smaller {option}")
