@@ -121,9 +121,12 @@ class SystemSpec:
             raise ShapeError(f"sample time Ts must be positive seconds, got {self.Ts!r}")
         names = [v.name for v in self.inputs + self.outputs + self.parameters]
         names += [f"{v.name}_start" for v in self.outputs]
+        if self.init_window > 1:  # the FMU's init-window parameters (nnfmu.window_names)
+            names += [f"{v.name}_past" for v in self.outputs + self.inputs]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ShapeError(f"variable names must be unique (outputs also claim '<name>_start'); repeated: {dup}")
+            raise ShapeError(f"variable names must be unique (outputs also claim '<name>_start', and with an init "
+                             f"window every channel '<name>_past'); repeated: {dup}")
 
     @property
     def n_u(self) -> int:

@@ -125,7 +125,7 @@ def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_pa
         shutil.copyfile(fmi_header_dir() / name, sources / name)
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    desc = model_description.describe(model.spec, token, stamp)
+    desc = model_description.describe(model.spec, token, stamp, fmi_version)
     header = c_header.render_c_header(desc, code.n_x, code.entry_points)
     (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
     c_files = [*CORE_SOURCES, *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
