@@ -127,3 +127,17 @@ def test_seeds_keep_the_best_or_their_ensemble_and_resume(valve_tiny, tmp_path):
         train_seeds(valve_tiny, gru(hidden=4), cfg, seeds=2, out=tmp_path / "e.pt")
     with pytest.raises(ConfigError, match="seeds must be an integer >= 2"):
         train_seeds(valve_tiny, gru(), cfg, seeds=1, out=tmp_path / "x.pt")
+
+
+def test_increment_auto_keeps_the_output_mode_with_the_lower_validation_nrmse(valve_small_dir, tmp_path, capsys):
+    from nnfmu.cli import main
+
+    out = tmp_path / "m.pt"
+    assert main(["train", "--data", str(valve_small_dir), "--arch", "mlp", "--hidden", "8", "--epochs", "1",
+                 "--truncate", "40", "--increment", "auto", "--quiet", "-o", str(out)]) == 0
+    scores = {m: load_checkpoint(tmp_path / f"m.{m}.pt")["summary"]["best_valid_nrmse"]
+              for m in ("residual", "increment")}
+    kept = load_checkpoint(out)
+    assert kept["summary"]["best_valid_nrmse"] == min(scores.values())
+    assert kept["model_config"]["increment"] == (scores["increment"] < scores["residual"])
+    assert "kept the" in capsys.readouterr().out

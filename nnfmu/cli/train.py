@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 from nnfmu.cli._resources import add_resource_options, check_resource_options
+from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -62,8 +63,6 @@ _TRAIN_OPTIONS = (
 )
 # Switches (store_true), model or training fields.
 _FLAG_OPTIONS = (
-    ("--increment", "increment", "predict the increment y[k+1]-y[k] scaled by the data's increments, inputs "
-                                 "relative to the newest output: for integrating plants"),
     ("--join", "join", "join the training trajectories end to end before cutting --truncate windows (data cut "
                        "from one continuous recording)"),
 )
@@ -105,6 +104,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
     for flag, dest, text in _FLAG_OPTIONS:
         p.add_argument(flag, dest=dest, action="store_const", const=True, default=None, help=text)
+    p.add_argument("--increment", nargs="?", const="on", choices=["on", "auto"], default=None,
+                   help="increment mode for integrating plants: predict y[k+1]-y[k] scaled by the data's "
+                        "increments, inputs relative to the newest output. 'auto' trains the network both ways "
+                        "(into <out stem>.residual.pt and .increment.pt) and keeps the one with the lower "
+                        "validation NRMSE")
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
@@ -162,7 +166,7 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     from nnfmu.models import ModelConfig
 
     given = _given(args, _MODEL_OPTIONS)
-    if args.increment is not None:
+    if args.increment == "on":
         given["increment"] = True
     arch = args.arch or (stored or {}).get("arch")
     hybrid_given = _given(args, _HYBRID_OPTIONS)
@@ -204,15 +208,12 @@ def _differs(config, key: str, value) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import signal
     from pathlib import Path
 
-    from nnfmu.cli._outputs import remove_if_untrained
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
     from nnfmu.models import load_checkpoint
-    from nnfmu.training import train
 
     out = Path(args.out)
     device = check_resource_options(args)
@@ -225,8 +226,20 @@ def _run(args: argparse.Namespace) -> int:
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    if args.increment == "auto":
+        return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
     if args.seeds is not None:
-        return _run_seeds(args, ds, model_config, train_config, out, device)
+        return run_seeds(args, ds, model_config, train_config, out, device)
+    return _run_one(args, ds, model_config, train_config, out, device)
+
+
+def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
+    """One training into ``out`` (or its resumption), with the summary printed."""
+    import signal
+
+    from nnfmu.cli._outputs import remove_if_untrained
+    from nnfmu.training import train
+
     try:
         result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
                        device=device, threads=args.threads)
@@ -250,37 +263,5 @@ def _run(args: argparse.Namespace) -> int:
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
-    _print_test(ds, result.test, result.test_window, model_config.init_window)
-    return 0
-
-
-def _print_test(ds, test, test_window, n: int) -> None:
-    per_output = ", ".join(f"{c.name} {v:.4f}" for c, v in zip(ds.outputs, test.output_mean))
-    print(f"test free-run NRMSE: {test.mean:.4f} ({per_output}), from the measured y0")
-    if test_window is not None:
-        print(f"test free-run NRMSE after the init window: {test_window.mean:.4f} (samples 0..{n - 1} seen, "
-              f"scored from sample {n})")
-
-
-def _run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
-    from nnfmu.training import train_seeds
-
-    if args.resume:
-        from nnfmu.errors import ConfigError
-
-        raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
-                          "drop --resume and run the same command again")
-    result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
-                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads)
-    for note in result.notes:
-        print(f"note: {note}")
-    for r in result.seeds:
-        test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
-        print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
-    spread = result.spread()
-    print(f"kept the {args.keep} of {args.seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
-          f"checkpoint {out}")
-    if result.test is not None:
-        _print_test(ds, result.test, result.test_window, model_config.init_window)
-        print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
+    print_test(ds, result.test, result.test_window, model_config.init_window)
     return 0
