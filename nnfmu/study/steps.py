@@ -128,7 +128,7 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
     train_config = hyper.train_config(strategy=strategy, epochs=budget.epochs, patience=budget.patience,
                                       seed=seed, max_minutes=budget.max_minutes)
     if budget.seeds > 1:
-        return _train_seeds(ds, model_config, train_config, budget, ckpt, inputs, progress)
+        return _train_seeds(ds, model_config, train_config, budget, ckpt, inputs, progress, device, threads)
     resume = _resumable(ckpt, inputs, model_config, train_config)
     error_file(ckpt).unlink(missing_ok=True)
     if not resume:
@@ -148,7 +148,7 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
 
 
 def _train_seeds(ds: Dataset, model_config, train_config, budget: Budget, ckpt: Path, inputs: tuple[Path, ...],
-                 progress: bool) -> str:
+                 progress: bool, device: str, threads: int | None) -> str:
     """``budget.seeds`` seeds of one network (:func:`nnfmu.training.train_seeds`); the kept model goes to ``ckpt``."""
     import shutil
 
@@ -161,13 +161,13 @@ def _train_seeds(ds: Dataset, model_config, train_config, budget: Budget, ckpt: 
     ckpt.unlink(missing_ok=True)
     try:
         result = train_seeds(ds, model_config, train_config, seeds=budget.seeds, keep=budget.keep, out=ckpt,
-                             jobs=1, progress=progress)
+                             jobs=1, progress=progress, device=device, threads=threads)
     except TrainingError as exc:
         write_text_atomic(error_file(ckpt), f"{exc}\n")
         return f"FAILED: {exc}"
     spread = result.spread()
-    return (f"{budget.keep} of {budget.seeds} seeds: valid NRMSE {result.valid_nrmse:.4f}, test {result.test_nrmse:.4f}; "
-            f"seeds' test {spread['mean']:.4f} ({spread['min']:.4f}-{spread['max']:.4f})")
+    return (f"{budget.keep} of {budget.seeds} seeds: valid NRMSE {result.valid_nrmse:.4f}, test "
+            f"{result.test_nrmse:.4f}; seeds' test {spread['mean']:.4f} ({spread['min']:.4f}-{spread['max']:.4f})")
 
 
 # ---- FMUs ----------------------------------------------------------------------------------------
