@@ -52,7 +52,9 @@ def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evalua
     entry, evaluation = _score(ds, study, name, label)
     failed = steps.error_file(ckpt_path)
     seeds = summary.get("seeds") or []
-    training = {"epochs_run": summary.get("epochs_run"), "best_epoch": ckpt.get("best_epoch"),
+    per_seed = (lambda key: ", ".join(str(r.get(key)) for r in seeds)) if seeds else None
+    training = {"epochs_run": per_seed("epochs_run") if seeds else summary.get("epochs_run"),
+                "best_epoch": per_seed("best_epoch") if seeds else ckpt.get("best_epoch"),
                 "best_valid_nrmse": _clean(summary.get("best_valid_nrmse")),
                 "torch_test_nrmse": _clean(summary.get("test_nrmse")), "stop_reason": summary.get("stop_reason"),
                 "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))
