@@ -100,6 +100,8 @@ def _notes(doc: dict) -> list[str]:
         if n["training"]["error"]:
             notes.append(f"- {n['label']}: training failed, the best weights before the failure were used: "
                          f"{n['training']['error']}")
+    warned = sorted({w for n in doc["networks"] for w in n["training"].get("notes", []) if w.startswith("WARNING")})
+    notes += [f"- Validation: {w[len('WARNING: '):]}" for w in warned]
     for n in doc["networks"]:
         t = n["training"]
         if "time-budget" in [t["stop_reason"], *((t.get("seeds") or {}).get("stop_reasons") or [])]:

@@ -60,7 +60,7 @@ def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evalua
                 "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))
                                  + sum(r.get("seconds") or 0.0 for r in seeds)),
                 "error": failed.read_text().strip() if failed.exists() else None,
-                "valid_samples": summary.get("valid_samples"),
+                "valid_samples": summary.get("valid_samples"), "notes": summary.get("notes") or [],
                 "seeds": seed_summary(seeds, summary.get("keep"))}
     paths = {k: _rel(study, study.path(k, name)) for k in ("models", "fmus", "scores")}
     return ({"name": name, "label": label, "arch": arch, "strategy": strategy, **entry, "training": training,

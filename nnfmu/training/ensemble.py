@@ -238,7 +238,7 @@ def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths:
     window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 and test is not None else None
     summary = {"best_valid_nrmse": valid_nrmse, "test_nrmse": None if test is None else test.mean,
                "test_nrmse_window": None if window is None else window.mean, "stop_reason": "seeds",
-               "keep": keep, "seeds": rows}
+               "keep": keep, "seeds": rows, "valid_samples": valid.n_samples, "notes": notes + valid_notes}
     save_checkpoint(out, model, train_config=cfg.to_dict(), history=[], best_epoch=None, summary=summary)
     model = load_model(out)
     return SeedsResult(model, keep, valid_nrmse, test, window, rows, out, notes + valid_notes)
