@@ -77,6 +77,9 @@ class StepModel(nn.Module):
         Where the weights come from (checkpoint path, training figures); empty for a fresh model.
     """
 
+    #: Whether its free runs feed back an output that training may disturb (``TrainConfig.feedback_noise``).
+    takes_feedback_noise = True
+
     def __init__(self, config: ModelConfig, meta: Mapping | None = None):
         super().__init__()
         if not isinstance(config, ModelConfig):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import torch
 
-from nnfmu.errors import TrainingError
+from nnfmu.errors import ConfigError, TrainingError
 from nnfmu.models.base import StepModel
 from nnfmu.models.checkpoint import save_checkpoint, state_snapshot
 from nnfmu.training.averaging import WeightAverage
@@ -81,6 +81,9 @@ class Session:
     def __init__(self, model: StepModel, cfg: TrainConfig, train_seqs: list, valid, out: Path | None):
         self.model, self.cfg, self.train_seqs, self.valid, self.out = model, cfg, train_seqs, valid, out
         self.optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        if cfg.feedback_noise and not model.takes_feedback_noise:
+            raise ConfigError(f"a {type(model).__name__} feeds back no output that feedback_noise could disturb; "
+                              "train it with feedback_noise=0")
         self.average = WeightAverage(model, cfg)
         self.context = model.config.init_window - 1  # samples before each training free run, for the init window
         self.epoch = 0
