@@ -1,11 +1,13 @@
 """Slider datasets: an integrating plant (force -> position) with long validation and test records.
 
-Every trajectory starts with the mass at rest at 0 m, follows a random force
-excitation through a random warm-up (up to 2 s) and is recorded after it, so
-recorded trajectories start from varied positions and speeds. The validation
-and test records are four times longer than the training ones: the position
-wanders further than in any training trajectory, which is what an integrating
-plant does to a model trained on short records.
+Every record starts with the mass at rest (as an experiment on a real axis
+does) at a random position in ``start_range``, and follows a random force
+excitation. Starting at rest matters on an integrating plant: an initial speed
+that the model does not know would shift the whole record (the position never
+forgets it), whatever the model. The validation and test records are four
+times longer than the training ones: the position wanders further than in any
+training record, which is what an integrating plant does to a model trained on
+short records.
 """
 
 from __future__ import annotations
@@ -38,14 +40,14 @@ _LIMITS = (SignalLimits(u_min=-SLIDER_F_MAX, u_max=SLIDER_F_MAX, rate_max=60.0),
 
 @dataclass(frozen=True, kw_only=True)
 class SliderDataConfig:
-    """Numbers of trajectories and samples per split; the warm-up range in seconds."""
+    """Numbers of trajectories and samples per split; the range of the starting positions in m."""
 
     n_train: int
     train_steps: int
     n_valid: int
     n_test: int
     test_steps: int
-    warmup: tuple[float, float] = (0.0, 2.0)
+    start_range: tuple[float, float] = (-5.0, 5.0)
 
 
 SLIDER_SIZES = {
@@ -54,12 +56,13 @@ SLIDER_SIZES = {
 }
 
 
-def _simulate(system, u: np.ndarray, n_sub: int) -> np.ndarray:
-    """Positions (N,) of a free run from rest at 0 m under the forces ``u`` (N, 1); sample k before u[k]."""
+def _simulate(system, u: np.ndarray, pos0: float, n_sub: int) -> np.ndarray:
+    """Positions (N, 1) of a free run from rest at ``pos0`` under the forces ``u`` (N, 1); sample k before u[k]."""
     step = rk4_function(system.ode, Ts=SLIDER_TS, n_sub=n_sub, name="slider_rk4")
     p = system.parameter_values()
-    xs = np.asarray(step.mapaccum("sim", len(u) - 1)(np.zeros(2), u[:-1].T, np.repeat(p[:, None], len(u) - 1, 1)))
-    x = np.hstack([np.zeros((2, 1)), xs]).T
+    x0 = np.array([pos0, 0.0])
+    xs = np.asarray(step.mapaccum("sim", len(u) - 1)(x0, u[:-1].T, np.repeat(p[:, None], len(u) - 1, 1)))
+    x = np.hstack([x0[:, None], xs]).T
     if not np.isfinite(x).all():
         raise SimulationError("slider simulation produced non-finite states; check the parameters "
                               "(v_eps too small for Ts / n_sub?)")
@@ -71,11 +74,10 @@ def _split(system, cfg: SliderDataConfig, n_traj: int, n_steps: int, seed: int, 
     us, ys = [], []
     for i in range(n_traj):
         rng = np.random.default_rng([seed, split, i])
-        n_warm = int(round(rng.uniform(*cfg.warmup) / SLIDER_TS))
-        u = excitation(n_warm + n_steps, Ts=SLIDER_TS, limits=_LIMITS, config=SLIDER_EXCITATION, seed=rng)
-        y = _simulate(system, u, n_sub)
-        us.append(u[n_warm:])
-        ys.append(y[n_warm:])
+        pos0 = rng.uniform(*cfg.start_range)
+        u = excitation(n_steps, Ts=SLIDER_TS, limits=_LIMITS, config=SLIDER_EXCITATION, seed=rng)
+        us.append(u)
+        ys.append(_simulate(system, u, pos0, n_sub))
     return Trajectories(tuple(us), tuple(ys))
 
 
@@ -89,9 +91,9 @@ def generate_slider(*, size: str = "standard", seed: int = 0, progress: bool = F
         A key of :data:`SLIDER_SIZES`: ``"standard"`` (40 x 1000 train, 4 x 4000 valid and test)
         or ``"small"`` (16 x 400 train, 2 x 1600 valid and test).
     seed : int
-        Seeds every trajectory's excitation and warm-up.
+        Seeds every record's excitation and starting position.
     progress : bool
-        Accepted for a uniform interface; the slider generates in about a second.
+        Accepted for a uniform interface; the slider generates in seconds.
     params : SliderParams, optional
         Physical parameters (default :class:`SliderParams`).
     n_sub : int
