@@ -76,8 +76,7 @@ def test_window_teacher_forcing_sees_measured_history(arch):
         fused = model(u, y[:, 0], y)
         k = 2 * model.config.window  # a step whose window lies entirely inside the record
         L = model.config.window
-        x = torch.cat([model.normalise_y(y[:, k - L + 1:k + 1]).reshape(2, -1),
-                       model.normalise_u(u[:, k - L + 1:k]).reshape(2, -1)], dim=1)
+        x = model.state_from_window(model.normalise_y(y[:, k - L + 1:k + 1]), model.normalise_u(u[:, k - L + 1:k]))
         _, y_next = model.step(x, u[:, k])
     torch.testing.assert_close(fused[:, k + 1], y_next, rtol=1e-12, atol=1e-12)
 
@@ -127,7 +126,7 @@ def test_step_and_forward_reject_wrong_shapes():
         model(torch.zeros(2, 5, N_U), torch.zeros(2, N_Y), torch.zeros(2, 4, N_Y))
 
 
-@pytest.mark.parametrize("arch, n_x", [("mlp", 4 * 3 + 3 * 2), ("tcn", 15 * 3 + 14 * 2), ("rnn", 3 + 2 * 6),
+@pytest.mark.parametrize("arch, n_x", [("mlp", 4 * 3 + 3 * 2), ("tcn", 3 + 2 * 5 + 4 * 6 + 8 * 6), ("rnn", 3 + 2 * 6),
                                        ("gru", 3 + 2 * 6), ("lstm", 3 + 2 * 2 * 6)])
 def test_state_layout_is_the_documented_flat_vector(arch, n_x):
     """to_casadi and the FMU rely on this layout (see the module docstrings)."""
@@ -137,14 +136,16 @@ def test_state_layout_is_the_documented_flat_vector(arch, n_x):
     u0 = torch.tensor([[2.0, 1.0]], dtype=torch.float64)
     yn0, un0 = model.normalise_y(y0), model.normalise_u(u0)
     x0 = model.init(y0, u0)
-    if arch in ("mlp", "tcn"):
+    if arch == "mlp":
         L = model.config.window
         torch.testing.assert_close(x0, torch.cat([yn0.repeat(1, L), un0.repeat(1, L - 1)], dim=1))
+    elif arch == "tcn":  # y_k, then the first layer's delay line: k - 1 = 2 samples [y0, u0] at rest
+        torch.testing.assert_close(x0[:, :N_Y + 2 * 5], torch.cat([yn0, yn0, un0, yn0, un0], dim=1))
     else:
         torch.testing.assert_close(x0, torch.cat([yn0, torch.zeros(1, n_x - N_Y, dtype=torch.float64)], dim=1))
     x1, y1 = model.step(x0, u0)
     L = model.config.window
-    newest = slice(L * N_Y - N_Y, L * N_Y) if arch in ("mlp", "tcn") else slice(0, N_Y)
+    newest = slice(L * N_Y - N_Y, L * N_Y) if arch == "mlp" else slice(0, N_Y)
     torch.testing.assert_close(x1[:, newest], model.normalise_y(y1), rtol=1e-12, atol=1e-12)
 
 

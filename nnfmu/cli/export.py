@@ -25,13 +25,19 @@ def add_fmu_options(parser: argparse.ArgumentParser) -> None:
                         help="FMI 2.0 (default, read by every importer) or 3.0 co-simulation")
     parser.add_argument("--target-isa", metavar="ISA",
                         help="compile the binary for this -march (e.g. x86-64-v3, native); default: portable, "
-                             "with AVX2 chosen at load time where the CPU has it")
+                             "with AVX2+FMA or AVX-512 code chosen at load time where the CPU has it")
+    parser.add_argument("--profile", choices=["fast", "exact"], default="fast",
+                        help="fast (default): FMA and vectorised exp/tanh, equal to the model within 1e-12 "
+                             "relative; exact: the same bits as CasADi's own evaluation (docs/fmu-speed.md)")
+    parser.add_argument("--precision", choices=["float64", "float32"], default="float64",
+                        help="what the step computes in (the FMU's variables stay float64); float32 is about "
+                             "twice as fast for hidden sizes >= 64 (docs/fmu-speed.md)")
 
 
 def build_options(args: argparse.Namespace):
     from nnfmu.export.fmu import BuildOptions
 
-    return BuildOptions(target_isa=args.target_isa)
+    return BuildOptions(target_isa=args.target_isa, profile=args.profile, precision=args.precision)
 
 
 def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:

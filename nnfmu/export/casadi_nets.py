@@ -112,31 +112,11 @@ def recurrent_layer_expr(layer: nn.Module, inp, h, c=None):
     return (ca.tanh(gates) if layer.nonlinearity == "tanh" else ca.fmax(gates, 0)), None
 
 
-def needed_positions(convs, newest: int) -> list[list[int]]:
-    """Window positions each TCN layer's input must provide so that the last layer yields ``newest``.
-
-    Returns ``[P_0, ..., P_{n}]``: ``P_i`` are the input positions of layer i
-    (``P_0`` raw samples), ``P_n = [newest]`` the output. Residual layers (i >= 1)
-    also need their input at their own output positions.
-    """
-    wanted = [[newest]]
-    for i in range(len(convs) - 1, -1, -1):
-        k, d = convs[i].kernel_size[0], convs[i].dilation[0]
-        below = {p - (k - 1 - j) * d for p in wanted[0] for j in range(k)}
-        if i >= 1:
-            below |= set(wanted[0])
-        wanted.insert(0, sorted(below))
-    return wanted
-
-
-def conv_expr(conv: nn.Conv1d, h: dict, positions: list[int]):
-    """Valid dilated convolution at ``positions``: one ``mtimes`` of the weight with the stacked tap columns."""
-    k, d = conv.kernel_size[0], conv.dilation[0]
+def conv_column_expr(conv: nn.Conv1d, taps: list):
+    """One output column of a dilated convolution from its ``k`` input columns ``taps`` (oldest first):
+    one ``mtimes`` of the weight, tap-major, with the stacked taps."""
     if conv.stride[0] != 1 or conv.groups != 1 or conv.padding not in ((0,), "valid"):
         raise ExportError(f"Conv1d {conv} must have stride 1, groups 1 and no padding (the window pads causally)")
     weight = conv.weight.detach().permute(0, 2, 1).reshape(conv.out_channels, -1)  # (H, k*C): tap-major columns
-    taps = ca.horzcat(*[ca.vertcat(*[h[p - (k - 1 - j) * d] for j in range(k)]) for p in positions])
-    out = ca.mtimes(dm(weight), taps)
-    if conv.bias is not None:
-        out = out + ca.repmat(dm(conv.bias), 1, len(positions))
-    return out
+    out = ca.mtimes(dm(weight), ca.vertcat(*taps))
+    return out + dm(conv.bias) if conv.bias is not None else out

@@ -1,22 +1,30 @@
-"""CasADi ``(init, step)`` -> C source, with a unique symbol prefix and the matrix-product speed patch.
+"""CasADi ``(init, step)`` -> C source: a unique symbol prefix, and the build profile's rewrites.
 
 CasADi's generated C is correct but slow for dense networks: 92 % of a GRU-64
 step sits in its dense matrix-product helper, which walks the weight matrix
 row-wise (stride ``nrow``) and gives the compiler no ``restrict``, so
 ``gcc -O3`` cannot vectorise it (see ``shared/reference/step-speed.md``).
-:func:`patch_source` replaces that helper with one whose inner loop runs over
-the contiguous row index with ``restrict`` pointers. Every element of the
-result still adds its products in CasADi's order, so results are
-bit-identical to CasADi's own evaluation; only the loop nest is interchanged.
+Both profiles replace that helper with one whose inner loop runs over the
+contiguous row index with ``restrict`` pointers; every element of the result
+still adds its products in CasADi's order.
 
-The patch also
-- marks the model functions of code with dense matrix products for runtime
-  dispatch (GCC/Clang ``target_clones`` on x86-64 glibc): one portable binary
-  that uses AVX2 where the CPU has it, without FMA, so results stay
-  bit-identical;
-- hides every symbol of the generated file inside the FMU's shared library,
-  and all of them carry a per-model prefix, so that two FMUs loaded into one
-  process cannot clash.
+- ``profile="exact"``: nothing more. Compiled with ``-ffp-contract=off`` and
+  dispatched at load time to an AVX2 clone without FMA, the FMU computes the
+  same bits as CasADi's own evaluation.
+- ``profile="fast"`` (the default; see docs/fmu-speed.md): also inlines
+  ``csrc/nnfmu_fast.h``, stores the weight constants as row panels and calls
+  their products through its register-blocked kernel (:mod:`.panels`),
+  evaluates exp, tanh, fmax and fmin with its branch-free versions, and clones
+  the step function for x86-64-v3 (AVX2 + FMA) and x86-64-v4 (AVX-512) next
+  to the portable baseline. Compiled with ``-ffp-contract=fast``, each
+  product-add rounds once and exp/tanh differ from libm by at most 1 and 3
+  ulp: agreement with CasADi and torch becomes a tolerance (docs/fmu-speed.md).
+- ``precision="float32"``: CasADi writes the model in ``float``, behind
+  float64 entry points (:mod:`.single`).
+
+In every case the symbols of the generated file stay hidden inside the FMU's
+shared library and carry a per-model prefix, so that two FMUs loaded into one
+process cannot clash.
 """
 
 from __future__ import annotations
@@ -25,15 +33,22 @@ import hashlib
 import re
 import warnings
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 import casadi as ca
 
-from nnfmu.errors import FmuBuildError
+from nnfmu.errors import ConfigError, FmuBuildError
+from nnfmu.export import panels
+from nnfmu.export import single as single_precision
 from nnfmu.system import CasadiModel
 
 MODEL_C = "model_casadi.c"
 MODEL_H = "model_casadi.h"
+
+PROFILES = ("fast", "exact")
+PRECISIONS = ("float64", "float32")
+_KERNELS = "nnfmu_fast.h"
 
 _PREAMBLE = r"""
 /* ---- nnfmu: added after CasADi's output (nnfmu/export/codegen.py) ---- */
@@ -54,18 +69,29 @@ _PREAMBLE = r"""
 #else
 #define NNFMU_RESTRICT
 #endif
-/* Runtime dispatch: an AVX2 clone of each model function next to the baseline one (no FMA, so the
-   results are the same bits). Only where the toolchain and the C library support it. */
+#define casadi_real {real}
+#define casadi_int long long int
+#define NNFMU_FLOAT32 {float32}
+/* Runtime dispatch: {clones_doc}
+   Only where the toolchain and the C library support it (GCC or Clang, x86-64, glibc's ifunc);
+   elsewhere the portable code alone. */
 #if defined(__x86_64__) && defined(__linux__) && defined(__GLIBC__) && defined(__has_attribute)
 #if __has_attribute(target_clones)
-#define NNFMU_CLONES __attribute__((target_clones("avx2", "default")))
+#define NNFMU_CLONES __attribute__((target_clones({clones})))
 #endif
 #endif
 #ifndef NNFMU_CLONES
 #define NNFMU_CLONES
 #endif
-/* ---- end of nnfmu preamble ---- */
+{kernels}/* ---- end of nnfmu preamble ---- */
 """
+
+_CLONES = {
+    "exact": ('"avx2", "default"', "an AVX2 clone of the step function next to the baseline one (no FMA, "
+              "so the\n   results are the same bits)."),
+    "fast": ('"arch=x86-64-v4", "arch=x86-64-v3", "default"', "AVX-512 and AVX2+FMA clones of the step "
+             "function next to the baseline one."),
+}
 
 _EPILOGUE = """
 #ifdef NNFMU_VISIBILITY_PUSHED
@@ -102,6 +128,8 @@ void casadi_mtimes_dense(const casadi_real* NNFMU_RESTRICT x, casadi_int nrow_x,
 
 _DENSE_HELPER = re.compile(r"^void casadi_mtimes_dense\(.*?^}\n", re.S | re.M)
 _MODEL_FUNCTION = re.compile(r"^static int (casadi_f\d+)\(", re.M)
+_STEP_ENTRY = re.compile(r"_(?:entry|f32)_step\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
+                         r"casadi_real\* w, int mem\)\s*\{\s*return (casadi_f\d+)\(")
 _MUTABLE_STATIC = re.compile(r"^\s*static\s+(?!const\b)[^(\n]*[;=]", re.M)
 _INCLUDE = re.compile(r"^#include .*\n", re.M)
 
@@ -137,49 +165,93 @@ def _renamed(fn: ca.Function, name: str) -> ca.Function:
     return ca.Function(name, args, outs, fn.name_in(), fn.name_out())
 
 
-def patch_source(source: str, *, speed_patch: bool = True) -> str:
-    """Apply the preamble (symbol hiding) and, with ``speed_patch``, the vectorisable dense kernel and
-    runtime dispatch to CasADi's C output."""
+def _preamble(profile: str, precision: str, kernels: bool) -> str:
+    text = ""
+    if kernels:
+        text = (resources.files("nnfmu.export") / "csrc" / _KERNELS).read_text(encoding="utf-8")
+    clones, doc = _CLONES[profile]
+    return _PREAMBLE.format(real="float" if precision == "float32" else "double",
+                            float32=int(precision == "float32"), clones=clones, clones_doc=doc, kernels=text)
+
+
+def check_options(profile: str, precision: str) -> None:
+    """Raise ConfigError naming the valid values if ``profile`` or ``precision`` is unknown."""
+    for what, value, valid in (("profile", profile, PROFILES), ("precision", precision, PRECISIONS)):
+        if value not in valid:
+            raise ConfigError(f"unknown build {what} {value!r}; choose one of {', '.join(valid)}")
+
+
+def patch_source(source: str, *, speed_patch: bool = True, profile: str = "fast",
+                 precision: str = "float64") -> str:
+    """Apply the preamble (symbol hiding) and, with ``speed_patch``, the profile's rewrites (module doc)."""
+    check_options(profile, precision)
     includes = list(_INCLUDE.finditer(source))
     if not includes:
         raise FmuBuildError("CasADi's generated C has no #include line; nnfmu cannot patch it "
                             "(is the installed CasADi the pinned 3.8.x?)")
+    dense = speed_patch and "casadi_mtimes_dense(" in source
+    fast = dense and profile == "fast"
     cut = includes[-1].end()
-    source = source[:cut] + _PREAMBLE + source[cut:] + _EPILOGUE
-    if not speed_patch or "casadi_mtimes_dense(" not in source:
+    source = source[:cut] + _preamble(profile, precision, fast) + source[cut:] + _EPILOGUE
+    if not dense:
         return source  # scalar (SX) code: nothing to vectorise, and clones would only double compile time
     source, n = _DENSE_HELPER.subn(lambda _: _DENSE_KERNEL, source, count=1)
     if n != 1:
         warnings.warn("CasADi's dense matrix-product helper has an unexpected shape; the FMU is "
                       "correct but its step is not vectorised (expected CasADi 3.8.x)", stacklevel=3)
-    return _MODEL_FUNCTION.sub(r"NNFMU_CLONES\nstatic int \1(", source)
+    if fast:
+        source = panels.use_fast_math(panels.panelize(source, precision))
+    step = _STEP_ENTRY.search(source)  # clone the step only: init runs once, and each clone costs compile time
+
+    def clone(match: re.Match) -> str:
+        cloned = step is None or match.group(1) == step.group(1)
+        return f"{'NNFMU_CLONES' + chr(10) if cloned else ''}static int {match.group(1)}("
+
+    return _MODEL_FUNCTION.sub(clone, source)
 
 
-def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True) -> GeneratedCode:
+def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True,
+               profile: str = "fast", precision: str = "float64") -> GeneratedCode:
     """Write ``model_casadi.c``/``.h`` for ``model`` into ``directory``; entry points are ``<prefix>_entry_*``.
+
+    ``profile`` ("fast" or "exact") and ``precision`` ("float64" or "float32") are described in the
+    module docstring. The entry points always take and return double.
 
     Raises FmuBuildError if CasADi cannot generate C for the functions, or if
     the generated code keeps mutable static state (which would break several
-    instances running side by side).
+    instances running side by side); ConfigError for an unknown profile or precision.
     """
+    check_options(profile, precision)
     names = {"NNFMU_INIT": f"{prefix}_entry_init", "NNFMU_STEP": f"{prefix}_entry_step"}
-    generator = ca.CodeGenerator(MODEL_C, {"with_header": True, "verbose": False, "prefix": prefix})
+    single = precision == "float32"
+    functions = {entry: _renamed(fn, entry) for entry, fn in zip(names.values(), (model.init, model.step))}
+    options = {"with_header": True, "verbose": False, "prefix": prefix, "casadi_real": "float" if single else "double"}
+    generator = ca.CodeGenerator(MODEL_C, options)
     try:
-        generator.add(_renamed(model.init, names["NNFMU_INIT"]))
-        generator.add(_renamed(model.step, names["NNFMU_STEP"]))
+        for entry, fn in functions.items():
+            generator.add(_renamed(fn, single_precision.inner_name(entry)) if single else fn)
         generator.generate(str(directory) + "/")
     except RuntimeError as exc:
         raise FmuBuildError(
             f"CasADi cannot generate C code for model {model.spec.name!r}: {exc}; build init and step "
             f"from code-generatable operations (no external or plugin functions)") from exc
     path = Path(directory) / MODEL_C
-    source = patch_source(path.read_text(encoding="utf-8"), speed_patch=speed_patch)
+    source = patch_source(path.read_text(encoding="utf-8"), speed_patch=speed_patch, profile=profile,
+                          precision=precision)
     mutable = _MUTABLE_STATIC.findall(source)
     if mutable:
         raise FmuBuildError(
             f"the generated C for {model.spec.name!r} keeps mutable static state ({mutable[0].strip()!r}), "
             f"so FMU instances would share it; use CasADi functions without memory objects")
+    if single:
+        source = _insert_before_epilogue(source, single_precision.adapters(functions))
+        (Path(directory) / MODEL_H).write_text(single_precision.header(list(functions)), encoding="utf-8")
     path.write_text(source, encoding="utf-8")
     entry = dict(names)
     entry.update({f"{macro}_WORK": f"{symbol}_work" for macro, symbol in names.items()})
     return GeneratedCode(MODEL_C, MODEL_H, entry, model.n_x)
+
+
+def _insert_before_epilogue(source: str, text: str) -> str:
+    cut = source.rindex(_EPILOGUE)
+    return source[:cut] + text + source[cut:]

@@ -19,8 +19,15 @@ from typing import Sequence
 from nnfmu.errors import FmuBuildError
 
 #: ``-O3`` is needed for gcc 12 to vectorise the matrix kernel; ``-ffp-contract=off`` keeps a*b+c
-#: unfused on FMA targets, so the FMU computes the same bits as CasADi's own evaluation.
+#: unfused on FMA targets, so the code computes the same bits as CasADi's own evaluation.
 DEFAULT_FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fPIC", "-fvisibility=hidden")
+#: Flags of the FMU build profiles (nnfmu.export.codegen): "exact" is DEFAULT_FLAGS; "fast" lets the
+#: compiler fuse a*b+c into FMA, and -fno-trapping-math lets it turn the branch-free selects of the
+#: vector exp/tanh into blends (the FMU never unmasks floating-point traps, so nothing else changes).
+PROFILE_FLAGS = {
+    "exact": DEFAULT_FLAGS,
+    "fast": ("-O3", "-std=c99", "-ffp-contract=fast", "-fno-trapping-math", "-fPIC", "-fvisibility=hidden"),
+}
 CANDIDATES = ("cc", "gcc", "clang")
 
 

@@ -3,7 +3,7 @@
 The members' own Functions (:func:`nnfmu.export.to_casadi`) are called on their slices of the
 state; the ensemble's output is the mean of theirs, and it is written back into every member's
 state as its newest output, in the member's normalised units, at the slot the member's
-``_inject_y`` writes (recurrent: the first ``n_y`` entries; MLP/TCN: the newest window sample).
+``_inject_y`` writes (recurrent and TCN: the first ``n_y`` entries; MLP: the newest window sample).
 """
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from __future__ import annotations
 import casadi as ca
 
 from nnfmu.export import casadi_nets as nets
-from nnfmu.models import EnsembleStepModel, RecurrentStepModel, StepModel
+from nnfmu.models import EnsembleStepModel, MLPStepModel, StepModel
 
 
 def _newest_y_slot(member: StepModel) -> int:
     """Index of the first entry of the newest output ``y_k`` in a member's flat state."""
     c = member.config
-    return 0 if isinstance(member, RecurrentStepModel) else (c.window - 1) * c.n_y
+    return (c.window - 1) * c.n_y if isinstance(member, MLPStepModel) else 0
 
 
 def ensemble_to_casadi(model: EnsembleStepModel, member_to_casadi) -> tuple[ca.Function, ca.Function]:

@@ -44,7 +44,7 @@ from pathlib import Path
 from nnfmu.atomic import write_atomic
 from nnfmu.errors import ConfigError, FmuBuildError
 from nnfmu.export import c_header, codegen, compiler, model_description
-from nnfmu.export.compiler import DEFAULT_FLAGS
+from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.system import CasadiModel
 
 TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c",
@@ -69,22 +69,33 @@ class BuildOptions:
     target_isa : str or None
         ``-march`` value for the whole binary, e.g. ``"x86-64-v3"`` or ``"native"``.
         Default None: the compiler's portable baseline, with the model functions
-        dispatched at load time to an AVX2 clone where the CPU has one (x86-64
+        dispatched at load time to clones for the instruction sets the CPU has (x86-64
         Linux), which is nearly as fast and runs on any x86-64 machine.
-    flags : tuple of str
-        Compiler flags before ``-march``; see :data:`nnfmu.export.compiler.DEFAULT_FLAGS`.
+    profile : {"fast", "exact"}
+        "fast" (default): FMA contraction, vectorised exp/tanh, weights in row panels and
+        AVX2+FMA / AVX-512 clones; agrees with torch to a documented tolerance. "exact": the
+        same bits as CasADi's own evaluation. See docs/fmu-speed.md and :mod:`nnfmu.export.codegen`.
+    precision : {"float64", "float32"}
+        What the step computes in; the FMU's variables are float64 either way.
+    flags : tuple of str or None
+        Compiler flags before ``-march``; default the profile's, see
+        :data:`nnfmu.export.compiler.PROFILE_FLAGS`.
     speed_patch : bool
-        Rewrite CasADi's dense matrix-product kernel so that it vectorises (bit-identical
-        results; see :mod:`nnfmu.export.codegen`). False keeps CasADi's code as generated,
-        for comparison only.
+        Rewrite CasADi's dense matrix-product code for speed (see :mod:`nnfmu.export.codegen`).
+        False keeps CasADi's code as generated, for comparison only.
     """
 
     compiler: str | None = None
     target_isa: str | None = None
-    flags: tuple[str, ...] = DEFAULT_FLAGS
+    profile: str = "fast"
+    precision: str = "float64"
+    flags: tuple[str, ...] | None = None
     speed_patch: bool = True
 
     def __post_init__(self) -> None:
+        codegen.check_options(self.profile, self.precision)
+        if self.flags is None:
+            object.__setattr__(self, "flags", PROFILE_FLAGS[self.profile])
         if isinstance(self.flags, str) or not all(isinstance(f, str) for f in self.flags):
             raise ConfigError(f"BuildOptions.flags must be a sequence of strings, got {self.flags!r}")
         object.__setattr__(self, "flags", tuple(self.flags))
@@ -113,11 +124,12 @@ def fmi_header_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_patch: bool):
+def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options: BuildOptions):
     """Generate and copy every C file into ``sources``; return the description and the C files to compile."""
     sources.mkdir(parents=True)
     prefix = codegen.symbol_prefix(model)
-    code = codegen.generate_c(model, sources, prefix, speed_patch=speed_patch)
+    code = codegen.generate_c(model, sources, prefix, speed_patch=options.speed_patch, profile=options.profile,
+                              precision=options.precision)
     templates = resources.files("nnfmu.export") / "templates"
     for name in (*TEMPLATES, *WRAPPER[fmi_version]):
         (sources / name).write_text((templates / name).read_text(encoding="utf-8"), encoding="utf-8")
@@ -133,7 +145,7 @@ def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, speed_pa
 
 
 def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions) -> None:
-    desc, c_files = _write_sources(model, fmi_version, root / "sources", options.speed_patch)
+    desc, c_files = _write_sources(model, fmi_version, root / "sources", options)
     if fmi_version == 2:
         xml = model_description.render_fmi2(desc, c_files)
     else:

@@ -7,8 +7,9 @@
 
 The functions work in physical units (normalisation is inside), include the
 skip connection, treat dropout as the identity, and carry exactly the state
-vector documented in :mod:`nnfmu.models.recurrent` and
-:mod:`nnfmu.models.window`, so ``CasadiModel.simulate`` equals
+vector documented in :mod:`nnfmu.models.recurrent`, :mod:`nnfmu.models.window`
+(the MLP) and :mod:`nnfmu.models.tcn_state` (the TCN's delay lines: a step
+computes one new column per layer), so ``CasadiModel.simulate`` equals
 ``model.simulate`` (to about 1e-15 per step in float64). The graphs are MX
 with the weights as dense constants (see :mod:`nnfmu.export.casadi_nets`).
 Every export is checked numerically against the torch step; a model whose
@@ -26,9 +27,10 @@ import torch
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
-from nnfmu.export.init_window import init_function
 from nnfmu.export.ensemble import ensemble_to_casadi
+from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
+from nnfmu.models import tcn_state
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables
 
@@ -61,28 +63,29 @@ def _recurrent_step(model: RecurrentStepModel, x, un):
     return ca.vertcat(yn_next, *new_h, *new_c), yn_next
 
 
-def _tcn_features(model: TCNStepModel, samples: list):
-    """Feature vector (H, 1) of the newest window position, computing only the positions it needs."""
-    positions = nets.needed_positions(model.convs, len(samples) - 1)
-    h = dict(enumerate(samples))
-    for i, conv in enumerate(model.convs):
-        out = nets.activation_expr(model.activation, nets.conv_expr(conv, h, positions[i + 1]), "activation")
-        cols = ca.horzsplit(out)
-        h = {p: cols[j] if i == 0 else h[p] + cols[j] for j, p in enumerate(positions[i + 1])}
-    return h[len(samples) - 1]
+def _tcn_step(model: TCNStepModel, x, un):
+    """The incremental TCN step on its delay lines (layout: :mod:`nnfmu.models.tcn_state`)."""
+    c = model.config
+    yn, h, offset, new_lines = x[0:c.n_y], ca.vertcat(x[0:c.n_y], un), c.n_y, []
+    for i, (n, width) in enumerate(tcn_state.line_shapes(c)):
+        cols = [x[offset + j * width:offset + (j + 1) * width] for j in range(n)] + [h]
+        offset += n * width
+        taps = relative_taps(cols, c.n_y) if i == 0 and c.increment else cols[::2 ** i]
+        out = nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], taps), "activation")
+        new_lines += cols[1:]
+        h = out if i == 0 else h + out
+    yn_next = _skip(model, yn, nets.linear_expr(model.head, h))
+    return ca.vertcat(yn_next, *new_lines), yn_next
 
 
-def _window_step(model, x, un):
+def _window_step(model: MLPStepModel, x, un):
     c = model.config
     L = c.window
     ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
     us = [x[L * c.n_y + j * c.n_u:L * c.n_y + (j + 1) * c.n_u] for j in range(L - 1)] + [un]
     seen = [y - ys[-1] for y in ys] if c.increment else ys  # increment mode: relative to the newest output
     samples = [ca.vertcat(y, u) for y, u in zip(seen, us)]
-    if isinstance(model, TCNStepModel):
-        n = nets.linear_expr(model.head, _tcn_features(model, samples))
-    else:
-        n = nets.module_expr(model.net, ca.vertcat(*samples), "net")
+    n = nets.module_expr(model.net, ca.vertcat(*samples), "net")
     yn_next = _skip(model, ys[-1], n)
     return ca.vertcat(*ys[1:], yn_next, *us[1:]), yn_next
 
@@ -127,7 +130,8 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
     u_mean, u_std, y_mean, y_std = (nets.dm(b) for b in (model.u_mean, model.u_std, model.y_mean, model.y_std))
     init = init_function(model, u_mean, u_std, y_mean, y_std)
-    builder = _recurrent_step if isinstance(model, RecurrentStepModel) else _window_step
+    builder = (_recurrent_step if isinstance(model, RecurrentStepModel)
+               else _tcn_step if isinstance(model, TCNStepModel) else _window_step)
     x_next, yn_next = builder(model, x, (u - u_mean) / u_std)
     step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     if verify:

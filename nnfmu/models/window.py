@@ -1,6 +1,7 @@
-"""Window state shared by the MLP and the TCN: the last ``L`` samples of ``[y, u]``.
+"""Window models (MLP, TCN): the network sees the last ``L`` samples of ``[y, u]``.
 
-Flat state layout, all in normalised units (what the FMU carries)::
+The MLP's flat state, in normalised units (what the FMU carries), is that window
+(the TCN keeps delay lines instead: :mod:`nnfmu.models.tcn_state`)::
 
     x = [ y_{k-L+1} | ... | y_k   (L * n_y) | u_{k-L+1} | ... | u_{k-1}   ((L-1) * n_u) ]
 
@@ -10,14 +11,16 @@ by one sample. ``init(y0, u0)`` fills the window with ``y0`` and ``u0``: the
 system at rest before ``t0``; with an init window (``init_window > 1``) the
 measured samples before t0 fill it instead (:mod:`nnfmu.models.encoder`).
 Teacher forcing pads the measured sequence on the left the same way and
-evaluates all windows in one fused call. In increment mode the network sees
-the window's outputs relative to its newest one, ``y_j - y_k``.
+evaluates all windows in one fused call. In increment mode the MLP sees the
+window's outputs relative to its newest one, ``y_j - y_k`` (the TCN: each
+first-layer column relative to its own newest tap, :mod:`nnfmu.models.tcn_state`).
 """
 
 from __future__ import annotations
 
 import torch
 
+from nnfmu.errors import ShapeError
 from nnfmu.models.base import StepModel
 from nnfmu.models.encoder import last_samples
 
@@ -29,6 +32,10 @@ class WindowStepModel(StepModel):
     the step) and :meth:`_predict_sequence` (all windows of a padded sequence
     at once, used by teacher forcing).
     """
+
+    # In increment mode the network sees the whole window relative to its newest output (the MLP); False:
+    # the subclass makes its features translation invariant itself (the TCN, per first-layer column).
+    relative_window = True
 
     @property
     def n_x(self) -> int:
@@ -48,15 +55,15 @@ class WindowStepModel(StepModel):
         return torch.cat([yn0.repeat(1, L), un0.repeat(1, L - 1)], dim=1)
 
     def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
-        """The measured window fills the state: its last ``L`` outputs and the ``L - 1`` inputs before ``u0``."""
-        L, B = self.config.window, yn_win.shape[0]
-        y = last_samples(yn_win, L, yn_win[:, 0])
-        u = last_samples(un_win[:, :-1], L - 1, un_win[:, 0])
-        return torch.cat([y.reshape(B, -1), u.reshape(B, -1)], dim=1)
+        """The measured window gives the state: its last ``L`` outputs and the ``L - 1`` inputs before ``u0``
+        (padded in front with the window's oldest sample when it is shorter than ``L``)."""
+        L = self.config.window
+        return self.state_from_window(last_samples(yn_win, L, yn_win[:, 0]),
+                                      last_samples(un_win[:, :-1], L - 1, un_win[:, 0]))
 
     def _relative(self, window: torch.Tensor) -> torch.Tensor:
         """The window (B, L, n_y + n_u) as the network sees it: in increment mode, outputs minus the newest."""
-        if not self.config.increment:
+        if not (self.config.increment and self.relative_window):
             return window
         n_y = self.config.n_y
         return torch.cat([window[..., :n_y] - window[..., -1:, :n_y], window[..., n_y:]], dim=-1)
@@ -84,7 +91,10 @@ class WindowStepModel(StepModel):
         The network sees the same numbers in the same layout as in :meth:`_step_norm`, so the
         result is identical.
         """
-        samples = self._samples(self._init_norm(yn0, un[:, 0]) if x0 is None else x0)
+        if x0 is None:  # the rest state
+            samples = torch.cat([yn0, un[:, 0]], dim=1)[:, None].expand(-1, self.config.window - 1, -1)
+        else:
+            samples = self._samples(x0)
         yn, ys = yn0, [yn0]
         for un_k in un[:, :-1].unbind(1):
             yn = self._feedback(yn)
@@ -93,6 +103,18 @@ class WindowStepModel(StepModel):
             ys.append(yn)
             samples = window[:, 1:]
         return torch.stack(ys, dim=1)
+
+    def state_from_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> torch.Tensor:
+        """The state at step k from a measured window, normalised: ``y_{k-L+1..k}`` (B, L, n_y) and
+        ``u_{k-L+1..k-1}`` (B, L-1, n_u), oldest first -> ``x`` (B, n_x)."""
+        self._check_window(yn_window, un_window)
+        return torch.cat([yn_window.flatten(1), un_window.flatten(1)], dim=1)
+
+    def _check_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> None:
+        c = self.config
+        if tuple(yn_window.shape[1:]) != (c.window, c.n_y) or tuple(un_window.shape[1:]) != (c.window - 1, c.n_u):
+            raise ShapeError(f"the window has shapes {tuple(yn_window.shape)} and {tuple(un_window.shape)}, expected "
+                             f"(B, {c.window}, {c.n_y}) and (B, {c.window - 1}, {c.n_u})")
 
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         split = self.config.window * self.config.n_y
@@ -109,7 +131,7 @@ class WindowStepModel(StepModel):
         seq = torch.cat([feed, un[:, :-1]], dim=2)
         older = seq[:, :1].expand(-1, self.config.window - 1, -1) if x0 is None else self._samples(x0)
         padded = torch.cat([older, seq], dim=1)
-        if not self.config.increment:
+        if not (self.config.increment and self.relative_window):
             return self._skip(feed, self._predict_sequence(padded))
         windows = padded.unfold(1, self.config.window, 1).transpose(2, 3)  # (B, T-1, L, C)
         flat = self._relative(windows.reshape(-1, *windows.shape[2:]))
