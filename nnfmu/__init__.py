@@ -13,7 +13,8 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
 - linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
 - physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`, :func:`slider_system`;
   :func:`sx_to_torch`
-- the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`
+- the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`,
+  :class:`ContinuousDynamics` (the ODE of a continuous-time model)
 - errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
 """
 
@@ -37,6 +38,7 @@ _LAZY = {
     "nrmse": "nnfmu.metrics",
     "NrmseResult": "nnfmu.metrics",
     "CasadiModel": "nnfmu.system",
+    "ContinuousDynamics": "nnfmu.system",
     "SystemSpec": "nnfmu.system",
     "Variable": "nnfmu.system",
     "NnfmuError": "nnfmu.errors",

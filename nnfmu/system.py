@@ -142,21 +142,50 @@ class SystemSpec:
 
 
 @dataclass(frozen=True)
+class ContinuousDynamics:
+    """The ODE that a continuous-time model's ``step`` discretises; its FMU also offers Model Exchange.
+
+    ``ode(x[n_x], u[n_u](, p[n_p])) -> xdot[n_x]`` (state units per second) and
+    ``output(x[n_x](, p[n_p])) -> y[n_y]``, on the same state ``x`` as the model's
+    ``init`` and ``step`` (so ``x0 = init(y0, u0, p)`` starts both), with the ``p``
+    port iff the spec has parameters. ``states`` name the entries of ``x`` (name,
+    unit, description) and ``nominals`` give their typical magnitudes (> 0), which
+    an importer's solver uses to scale its error control.
+    """
+
+    ode: ca.Function
+    output: ca.Function
+    states: tuple[Variable, ...]
+    nominals: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "states", tuple(_as_variable(v) for v in self.states))
+        nominals = tuple(float(n) for n in self.nominals) or (1.0,) * len(self.states)
+        if len(nominals) != len(self.states) or not all(np.isfinite(n) and n > 0 for n in nominals):
+            raise ShapeError(f"nominals must be {len(self.states)} positive numbers (one per state), got {self.nominals!r}")
+        object.__setattr__(self, "nominals", nominals)
+
+
+@dataclass(frozen=True)
 class CasadiModel:
     """An ``(init, step)`` pair of CasADi Functions plus its :class:`SystemSpec`.
 
     ``init(y0[n_y], u0[n_u](, p[n_p])) -> x0[n_x]`` and
     ``step(x[n_x], u[n_u](, p[n_p])) -> (x_next[n_x], y_next[n_y])``, all dense
     column vectors. The ``p`` port exists on both or on neither, iff the spec
-    has parameters.
+    has parameters. ``continuous`` (optional) is the ODE that ``step`` discretises,
+    for continuous-time models (physics, hybrids with a derivative correction).
     """
 
     init: ca.Function
     step: ca.Function
     spec: SystemSpec
+    continuous: ContinuousDynamics | None = None
 
     def __post_init__(self) -> None:
         check_pair(self.init, self.step, self.spec)
+        if self.continuous is not None:
+            check_continuous(self.continuous, self.n_x, self.spec)
 
     @property
     def n_x(self) -> int:
@@ -236,6 +265,21 @@ def check_pair(init: ca.Function, step: ca.Function, spec: SystemSpec) -> None:
         first = 3 if with_p else 2
         sizes["init y_past"] = (init.size_in(first), n_past * spec.n_y)
         sizes["init u_past"] = (init.size_in(first + 1), n_past * spec.n_u)
+    for what, (got, n) in sizes.items():
+        if tuple(got) != (n, 1):
+            raise ShapeError(f"{what} has shape {tuple(got)}, expected ({n}, 1) for the spec {spec.name!r}")
+
+
+def check_continuous(dynamics: ContinuousDynamics, n_x: int, spec: SystemSpec) -> None:
+    """Check the ODE's and the output map's ports and sizes against the state size and ``spec``."""
+    extra = ["p"] if spec.n_p else []
+    for fn, ins, outs in ((dynamics.ode, ["x", "u"] + extra, ["xdot"]), (dynamics.output, ["x"] + extra, ["y"])):
+        if fn.name_in() != ins or fn.name_out() != outs:
+            raise ShapeError(f"CasADi Function {fn.name()!r} has ports {fn.name_in()} -> {fn.name_out()}, "
+                             f"expected {ins} -> {outs}")
+    sizes = {"ode x": (dynamics.ode.size_in(0), n_x), "ode u": (dynamics.ode.size_in(1), spec.n_u),
+             "ode xdot": (dynamics.ode.size_out(0), n_x), "output x": (dynamics.output.size_in(0), n_x),
+             "output y": (dynamics.output.size_out(0), spec.n_y), "states": ((len(dynamics.states), 1), n_x)}
     for what, (got, n) in sizes.items():
         if tuple(got) != (n, 1):
             raise ShapeError(f"{what} has shape {tuple(got)}, expected ({n}, 1) for the spec {spec.name!r}")

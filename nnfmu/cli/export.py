@@ -32,6 +32,13 @@ def add_fmu_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--precision", choices=["float64", "float32"], default="float64",
                         help="what the step computes in (the FMU's variables stay float64); float32 is about "
                              "twice as fast for hidden sizes >= 64 (docs/fmu-speed.md)")
+    parser.add_argument("--platforms", metavar="LIST",
+                        help="binaries to ship, comma-separated: linux64, win64, darwin64, aarch64-linux, "
+                             "aarch64-darwin (or the FMI 3 names x86_64-linux, ...), 'all', or 'host' (default: "
+                             "this machine only); others are cross-compiled with Zig (extra 'cross')")
+    parser.add_argument("--no-model-exchange", action="store_true",
+                        help="co-simulation only, also for a continuous-time model (physics, hybrid with a "
+                             "derivative correction), which otherwise offers Model Exchange too")
 
 
 def build_options(args: argparse.Namespace):
@@ -45,10 +52,16 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
     from nnfmu.export import build_fmu
 
     t0 = time.perf_counter()
-    path = build_fmu(model, out, fmi_version=args.fmi_version, options=build_options(args))
+    binaries: list[str] = []
+    with_me = model.continuous is not None and not args.no_model_exchange
+    path = build_fmu(model, out, fmi_version=args.fmi_version, options=build_options(args), model_exchange=with_me,
+                     platforms=args.platforms,
+                     on_binary=lambda folder, seconds: binaries.append(f"{folder} {seconds:.1f} s"))
     spec = model.spec
-    print(f"wrote {path} (FMI {args.fmi_version}.0 co-simulation, model {spec.name!r}, {spec.n_u} inputs, "
-          f"{spec.n_y} outputs, {spec.n_p} parameters, Ts = {spec.Ts:g} s) in {time.perf_counter() - t0:.1f} s")
+    interfaces = "co-simulation and model exchange" if with_me else "co-simulation"
+    print(f"wrote {path} (FMI {args.fmi_version}.0 {interfaces}, model {spec.name!r}, {spec.n_u} inputs, "
+          f"{spec.n_y} outputs, {spec.n_p} parameters, Ts = {spec.Ts:g} s) in {time.perf_counter() - t0:.1f} s; "
+          f"binaries: {', '.join(binaries)}")
     return path
 
 

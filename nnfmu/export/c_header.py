@@ -8,6 +8,7 @@ never hard-codes any of them), plus the prefixed CasADi entry points.
 from __future__ import annotations
 
 import sys
+from typing import Sequence
 
 from nnfmu.export.model_description import MAX_SAMPLES_PER_STEP, FmuDescription, num
 from nnfmu.window_names import past_name
@@ -31,8 +32,9 @@ def _bound(value: float | None, unbounded: float) -> str:
     return num(unbounded if value is None else value)
 
 
-def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str]) -> str:
-    """``nnfmu_model.h`` for the FMU described by ``desc`` with state size ``n_x``."""
+def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str],
+                    extra_lines: Sequence[str] = ()) -> str:
+    """``nnfmu_model.h`` for the FMU described by ``desc`` with state size ``n_x``; ``extra_lines`` at its end."""
     spec = desc.spec
     vr = {v.role: v.value_reference for v in reversed(desc.variables)}  # the first of each role
     first = {role: vr.get(role, len(desc.variables))
@@ -74,5 +76,5 @@ def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str]
     lines.append("/* the inputs' valid ranges (modelDescription min/max; unbounded: +-DBL_MAX) */")
     lines.append(_c_array("double", "nnfmu_u_min", [_bound(v.min, -sys.float_info.max) for v in spec.inputs]))
     lines.append(_c_array("double", "nnfmu_u_max", [_bound(v.max, sys.float_info.max) for v in spec.inputs]))
-    lines += ["", "#endif /* NNFMU_MODEL_H */", ""]
+    lines += [*extra_lines, "", "#endif /* NNFMU_MODEL_H */", ""]
     return "\n".join(lines)

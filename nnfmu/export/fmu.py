@@ -4,7 +4,10 @@ The FMU holds CasADi-generated C for ``init`` and ``step`` (``model_casadi.c``)
 and nnfmu's hand-written FMI wrapper (``templates/``: one shared core, FMI 2.0
 and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
 e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
-compiled with the system C compiler. No Python, no libtorch inside.
+compiled with the system C compiler, or for several (``platforms``: the others
+cross-compiled with Zig, :mod:`nnfmu.export.platforms`). A continuous-time model
+also gets Model Exchange (:mod:`nnfmu.export.model_exchange`). No Python, no
+libtorch inside.
 
 Behaviour of the FMU (the reference is docs/fmu.md; the C side is ``templates/nnfmu_core.h``):
 
@@ -30,9 +33,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import platform
 import shutil
-import sys
 import tempfile
 import uuid
 import zipfile
@@ -40,10 +41,13 @@ from dataclasses import dataclass
 from importlib import resources
 from os import PathLike
 from pathlib import Path
+from typing import Callable, Sequence
 
 from nnfmu.atomic import write_atomic
 from nnfmu.errors import ConfigError, FmuBuildError
-from nnfmu.export import c_header, codegen, compiler, model_description
+from nnfmu.export import c_header, codegen, model_description
+from nnfmu.export import model_exchange as _model_exchange
+from nnfmu.export import platforms as _platforms
 from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.system import CasadiModel
 
@@ -53,7 +57,7 @@ TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c"
 CORE_SOURCES = ("nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c", "nnfmu_state.c", "nnfmu_libm.c")
 #: nnfmu's own build links libm, so the model code calls it directly.
 OWN_BUILD_DEFINES = ("-DNNFMU_LINKS_LIBM",)
-WRAPPER = {2: ("nnfmu_fmi2.c",), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
+WRAPPER = {2: ("nnfmu_fmi2.h", "nnfmu_fmi2.c"), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 
@@ -106,15 +110,7 @@ class BuildOptions:
 
 def platform_folder(fmi_version: int) -> str:
     """``binaries/<folder>`` for this machine: FMI 2 names (linux64, ...) or FMI 3 platform tuples."""
-    machine = platform.machine().lower()
-    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(machine, machine)
-    system = {"linux": "linux", "darwin": "darwin", "win32": "windows"}.get(sys.platform)
-    if system is None:
-        raise FmuBuildError(f"building FMUs on {sys.platform!r} is not supported; use Linux, macOS or Windows")
-    if fmi_version == 3:
-        return f"{arch}-{system}"
-    bits = "64" if arch in ("x86_64", "aarch64") else "32"
-    return {"linux": "linux", "darwin": "darwin", "windows": "win"}[system] + bits
+    return _platforms.host_platform().folder(fmi_version)
 
 
 def fmi_header_dir() -> Path:
@@ -124,28 +120,41 @@ def fmi_header_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options: BuildOptions):
-    """Generate and copy every C file into ``sources``; return the description and the C files to compile."""
+def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options: BuildOptions, with_me: bool):
+    """Generate and copy every C file into ``sources``; return the description and the C files to compile.
+
+    ``with_me``: add the Model Exchange interface of ``model.continuous`` (:mod:`nnfmu.export.model_exchange`).
+    """
     sources.mkdir(parents=True)
     prefix = codegen.symbol_prefix(model)
     code = codegen.generate_c(model, sources, prefix, speed_patch=options.speed_patch, profile=options.profile,
                               precision=options.precision)
+    entry_points, structure, me_files = dict(code.entry_points), None, ()
+    if with_me:
+        entry_points.update(_model_exchange.generate_c(model, sources, prefix, speed_patch=options.speed_patch,
+                                                       profile=options.profile))
+        structure = _model_exchange.continuous_structure(model)
+        me_files = (*_model_exchange.ME_TEMPLATES, *_model_exchange.ME_WRAPPER[fmi_version])
     templates = resources.files("nnfmu.export") / "templates"
-    for name in (*TEMPLATES, *WRAPPER[fmi_version]):
+    for name in (*TEMPLATES, *WRAPPER[fmi_version], *me_files):
         (sources / name).write_text((templates / name).read_text(encoding="utf-8"), encoding="utf-8")
     for name in FMI_HEADERS[fmi_version]:
         shutil.copyfile(fmi_header_dir() / name, sources / name)
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    desc = model_description.describe(model.spec, token, stamp, fmi_version)
-    header = c_header.render_c_header(desc, code.n_x, code.entry_points)
+    desc = model_description.describe(model.spec, token, stamp, fmi_version, structure=structure)
+    header = c_header.render_c_header(desc, code.n_x, entry_points,
+                                      extra_lines=_model_exchange.c_header_lines(desc) if with_me else ())
     (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
-    c_files = [*CORE_SOURCES, *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
+    me_sources = _model_exchange.ME_SOURCES if with_me else ()
+    c_files = [*CORE_SOURCES, *me_sources, *(f for f in (*WRAPPER[fmi_version], *me_files)
+                                            if f.endswith(".c") and f not in me_sources)]
     return desc, c_files
 
 
-def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions) -> None:
-    desc, c_files = _write_sources(model, fmi_version, root / "sources", options)
+def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions, with_me: bool,
+                    targets: Sequence[_platforms.Platform], on_binary: Callable[[str, float], None] | None) -> None:
+    desc, c_files = _write_sources(model, fmi_version, root / "sources", options, with_me)
     if fmi_version == 2:
         xml = model_description.render_fmi2(desc, c_files)
     else:
@@ -153,12 +162,10 @@ def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: B
         (root / "sources" / "buildDescription.xml").write_text(
             model_description.render_build_description(desc, c_files), encoding="utf-8")
     (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
-    binary = root / "binaries" / platform_folder(fmi_version) / (
-        desc.model_identifier + compiler.shared_library_suffix())
-    compiler.compile_shared_library(
-        [root / "sources" / f for f in c_files], binary, include_dirs=[root / "sources"],
-        flags=[*options.compile_flags(), *OWN_BUILD_DEFINES], compiler=options.compiler,
-        what=f"compiling the FMU binary of {model.spec.name!r}")
+    _platforms.build_binaries(root, desc.model_identifier, [root / "sources" / f for f in c_files], fmi_version,
+                             targets, host_flags=[*options.compile_flags(), *OWN_BUILD_DEFINES],
+                             cross_flags=[*options.flags, *OWN_BUILD_DEFINES], compiler_command=options.compiler,
+                             on_binary=on_binary)
 
 
 def _zip_tree(root: Path, archive: Path) -> None:
@@ -169,8 +176,10 @@ def _zip_tree(root: Path, archive: Path) -> None:
 
 
 def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
-              options: BuildOptions | None = None) -> Path:
-    """Write ``model`` as a co-simulation FMU to ``out`` and return its path.
+              options: BuildOptions | None = None, model_exchange: bool = True,
+              platforms: str | Sequence[str] | None = None,
+              on_binary: Callable[[str, float], None] | None = None) -> Path:
+    """Write ``model`` as a co-simulation FMU to ``out`` (with Model Exchange for a continuous-time model).
 
     Parameters
     ----------
@@ -184,6 +193,16 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
         FMI 2.0 (default: every importer reads it) or FMI 3.0 co-simulation.
     options : BuildOptions, optional
         Compiler, flags and target instruction set.
+    model_exchange : bool
+        For a model with ``continuous`` dynamics (physics, derivative-corrected hybrids), also offer
+        Model Exchange (the ODE, with directional derivatives; docs/fmu-platforms.md). False, or a
+        discrete-time model: co-simulation only.
+    platforms : str or sequence of str, optional
+        The binaries to ship: names as FMI 2 or 3 spells them (``"linux64,win64,darwin64,aarch64-linux,
+        aarch64-darwin"``), ``"all"``, or None/``"host"``: this machine's only (see
+        :mod:`nnfmu.export.platforms`; others are cross-compiled with the ``ziglang`` package).
+    on_binary : callable, optional
+        Called as ``on_binary(folder, seconds)`` after each binary is compiled.
 
     Raises
     ------
@@ -198,6 +217,7 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
     if fmi_version not in WRAPPER:
         raise ConfigError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     options = options or BuildOptions()
+    targets = _platforms.parse_platforms(platforms)
     model_description.check_spec(model.spec)
     out = Path(out)
     if out.suffix.lower() != ".fmu":
@@ -208,6 +228,7 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
         problem = "is a file, not a folder" if out.parent.exists() else "does not exist; create it first"
         raise FmuBuildError(f"cannot write {out}: the folder {str(out.parent)!r} for the FMU {problem}")
     with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
-        _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options)
+        _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options, model_exchange and model.continuous is not None,
+                        targets, on_binary)
         write_atomic(out, lambda partial: _zip_tree(Path(tmp) / "fmu", partial))
     return out

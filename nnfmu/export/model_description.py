@@ -15,6 +15,7 @@ The layout is::
     then                     <y>_start             parameter, fixed: the initial outputs y0
     then                     parameters            parameter, tunable: the ``p`` port
     then                     <c>_past              parameter, fixed: the init window (``spec.init_window > 1``)
+    then (Model Exchange)    x.<state>, der(...)   local, continuous: the ODE's states, then their derivatives
 
 A model whose ``init`` sees an init window of ``N`` samples (:mod:`nnfmu.window_names`) takes
 the ``N - 1`` samples before t0 of every output and input: FMI 3 one array ``<c>_past`` of
@@ -24,7 +25,11 @@ oldest). Their start value is NaN, meaning "not set": the FMU then uses ``y0`` (
 
 The outputs at t0 are the ``<y>_start`` values, so they are initial unknowns
 that depend on those parameters only; outputs never depend directly on inputs
-(no feedthrough). The FMU's behaviour is described in docs/fmu.md.
+(no feedthrough). A continuous-time model's FMU also offers Model Exchange
+(:class:`ContinuousStructure`, built by :mod:`nnfmu.export.model_exchange`): then
+its outputs are continuous functions of the states, and the ModelStructure lists
+the dependencies of outputs and derivatives from the CasADi sparsity pattern. The
+FMU's behaviour is described in docs/fmu.md and docs/fmu-platforms.md.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ from dataclasses import dataclass
 
 from nnfmu import __version__
 from nnfmu.errors import FmuBuildError
-from nnfmu.system import SystemSpec
+from nnfmu.system import SystemSpec, Variable
 from nnfmu.window_names import past_element, past_name
 
 GENERATION_TOOL = f"nnfmu {__version__}"
@@ -69,6 +74,28 @@ class ScalarVariable:
     min: float | None = None
     max: float | None = None
     size: int = 1  # values of the variable: > 1 for an FMI 3 array (one Dimension)
+    nominal: float | None = None
+    derivative: int | None = None  # a state derivative: the value reference of its state
+
+
+#: A variable of the description by role and index, e.g. ("state", 2) or ("input", 0).
+Slot = tuple[str, int]
+
+
+@dataclass(frozen=True)
+class ContinuousStructure:
+    """The Model Exchange side of an FMU: its continuous states and what each unknown depends on.
+
+    ``outputs[i]`` are the knowns output i depends on (states), ``derivatives[j]`` those of
+    ``der(x_j)`` (states and inputs), ``initial`` maps each initial unknown (outputs, states,
+    derivatives) to the knowns it depends on at initialization (``output_start``, inputs, parameters).
+    """
+
+    states: tuple[Variable, ...]
+    nominals: tuple[float, ...]
+    outputs: tuple[tuple[Slot, ...], ...]
+    derivatives: tuple[tuple[Slot, ...], ...]
+    initial: tuple[tuple[Slot, tuple[Slot, ...]], ...]
 
 
 @dataclass(frozen=True)
@@ -80,9 +107,23 @@ class FmuDescription:
     model_identifier: str
     token: str
     generation_time: str
+    structure: ContinuousStructure | None = None
 
     def by_role(self, role: str) -> tuple[ScalarVariable, ...]:
         return tuple(v for v in self.variables if v.role == role)
+
+    def dependencies(self, kind: str) -> list[tuple[ScalarVariable, tuple[int, ...]]]:
+        """``(unknown, value references of its knowns)`` for kind 'output', 'derivative' or 'initial', by vr."""
+        vr = {(v.role, v.index): v.value_reference for v in self.variables}
+        if self.structure is None:  # co-simulation only: outputs depend on their start values at t0 only
+            starts = [(v, (vr[("output_start", v.index)],)) for v in self.by_role("output")]
+            return {"output": [(v, ()) for v in self.by_role("output")], "derivative": [], "initial": starts}[kind]
+        s = self.structure
+        pairs = {"output": zip(self.by_role("output"), s.outputs, strict=True),
+                 "derivative": zip(self.by_role("derivative"), s.derivatives, strict=True),
+                 "initial": ((self.variables[vr[slot]], knowns) for slot, knowns in s.initial)}[kind]
+        return sorted(((v, tuple(sorted(vr[k] for k in knowns))) for v, knowns in pairs),
+                      key=lambda pair: pair[0].value_reference)
 
     @property
     def units(self) -> list[str]:
@@ -92,7 +133,9 @@ class FmuDescription:
     def description(self) -> str:
         spec = self.spec
         head = spec.description or f"{spec.name}: discrete-time model"
-        return f"{head}; Ts = {spec.Ts:g} s. {STEPPING_RULE}"
+        me = (" Model Exchange: the ODE xdot = f(x, u, p) and y = g(x, p), with directional derivatives."
+              if self.structure else "")
+        return f"{head}; Ts = {spec.Ts:g} s. {STEPPING_RULE}.{me}"
 
 
 def check_spec(spec: SystemSpec) -> None:
@@ -131,8 +174,12 @@ def _window_rows(spec: SystemSpec, fmi_version: int) -> list[dict]:
     return rows
 
 
-def describe(spec: SystemSpec, token: str, generation_time: str, fmi_version: int = 2) -> FmuDescription:
-    """Assign value references (see the module docstring) and return the one description of the FMU."""
+def describe(spec: SystemSpec, token: str, generation_time: str, fmi_version: int = 2, *,
+             structure: ContinuousStructure | None = None) -> FmuDescription:
+    """Assign value references (see the module docstring) and return the one description of the FMU.
+
+    ``structure``: the Model Exchange side of a continuous-time model (states, dependencies), or None.
+    """
     check_spec(spec)
     rows = [
         dict(name="time", causality="independent", variability="continuous", unit="s",
@@ -150,8 +197,9 @@ def describe(spec: SystemSpec, token: str, generation_time: str, fmi_version: in
     rows += [dict(name=v.name, causality="input", variability="continuous", start=v.start, unit=v.unit,
                   description=v.description, role="input", index=i, min=v.min, max=v.max)
              for i, v in enumerate(spec.inputs)]
-    rows += [dict(name=v.name, causality="output", variability="discrete", initial="calculated", unit=v.unit,
-                  description=v.description, role="output", index=i) for i, v in enumerate(spec.outputs)]
+    rows += [dict(name=v.name, causality="output", variability="continuous" if structure else "discrete",
+                  initial="calculated", unit=v.unit, description=v.description, role="output", index=i)
+             for i, v in enumerate(spec.outputs)]
     rows += [dict(name=f"{v.name}_start", causality="parameter", variability="fixed", initial="exact",
                   start=v.start, unit=v.unit, role="output_start", index=i,
                   description=f"initial value y0 of output {v.name} (the output at the start time)")
@@ -160,9 +208,24 @@ def describe(spec: SystemSpec, token: str, generation_time: str, fmi_version: in
                   unit=v.unit, description=v.description, role="parameter", index=i)
              for i, v in enumerate(spec.parameters)]
     rows += _window_rows(spec, fmi_version) if spec.init_window > 1 else []
+    if structure is not None:
+        rows += _state_rows(structure, first_vr=len(rows))
     defaults = dict(initial=None, start=None, unit="", description="", index=0)
     variables = tuple(ScalarVariable(value_reference=vr, **{**defaults, **row}) for vr, row in enumerate(rows))
-    return FmuDescription(spec, variables, spec.name, token, generation_time)
+    return FmuDescription(spec, variables, spec.name, token, generation_time, structure)
+
+
+def _state_rows(structure: ContinuousStructure, first_vr: int) -> list[dict]:
+    """The continuous states ``x.<name>`` (value references from ``first_vr``), then their derivatives
+    ``der(x.<name>)``: the prefix keeps them apart from inputs, outputs and parameters of the same name."""
+    states = structure.states
+    rows = [dict(name=f"x.{v.name}", causality="local", variability="continuous", initial="calculated", unit=v.unit,
+                 description=f"continuous state: {v.description}".rstrip(": "), role="state", index=i, nominal=n)
+            for i, (v, n) in enumerate(zip(states, structure.nominals, strict=True))]
+    rows += [dict(name=f"der(x.{v.name})", causality="local", variability="continuous", initial="calculated",
+                  unit=f"{v.unit or '1'}/s", description=f"time derivative of x.{v.name}", role="derivative",
+                  index=i, derivative=first_vr + i) for i, v in enumerate(states)]
+    return rows
 
 
 def num(x: float) -> str:
@@ -189,7 +252,8 @@ def _bound_text(v: ScalarVariable, bound: float | None) -> str | None:
 
 
 def _value_attrs(v: ScalarVariable) -> dict[str, str]:
-    return _attrs(start=_start_text(v), min=_bound_text(v, v.min), max=_bound_text(v, v.max), unit=v.unit)
+    return _attrs(start=_start_text(v), min=_bound_text(v, v.min), max=_bound_text(v, v.max), unit=v.unit,
+                  nominal=_bound_text(v, v.nominal))
 
 
 def _to_text(root: ET.Element) -> str:
@@ -219,33 +283,43 @@ def _units_and_experiment(root: ET.Element, desc: FmuDescription) -> None:
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=num(desc.spec.Ts))
 
 
-def render_fmi2(desc: FmuDescription, source_files: list[str]) -> str:
-    """modelDescription.xml for FMI 2.0 Co-Simulation, listing ``source_files`` (relative to sources/)."""
-    root = ET.Element("fmiModelDescription", _header_attrs(desc, "2.0"), numberOfEventIndicators="0")
-    cs = ET.SubElement(root, "CoSimulation", modelIdentifier=desc.model_identifier,
-                       canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
-                       canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true",
-                       canGetAndSetFMUstate="true", canSerializeFMUstate="true",
-                       providesDirectionalDerivative="false")
-    files = ET.SubElement(cs, "SourceFiles")
+_FMI2_COMMON = dict(canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true",
+                    canGetAndSetFMUstate="true", canSerializeFMUstate="true")
+
+
+def _fmi2_interface(root: ET.Element, tag: str, desc: FmuDescription, source_files: list[str], **attrs) -> None:
+    element = ET.SubElement(root, tag, modelIdentifier=desc.model_identifier, **attrs, **_FMI2_COMMON)
+    files = ET.SubElement(element, "SourceFiles")
     for name in source_files:
         ET.SubElement(files, "File", name=name)
+
+
+def render_fmi2(desc: FmuDescription, source_files: list[str]) -> str:
+    """modelDescription.xml for FMI 2.0 Co-Simulation (and Model Exchange for a continuous-time model),
+    listing ``source_files`` (relative to sources/)."""
+    root = ET.Element("fmiModelDescription", _header_attrs(desc, "2.0"), numberOfEventIndicators="0")
+    if desc.structure:
+        _fmi2_interface(root, "ModelExchange", desc, source_files, completedIntegratorStepNotNeeded="true",
+                        providesDirectionalDerivative="true")
+    _fmi2_interface(root, "CoSimulation", desc, source_files, canHandleVariableCommunicationStepSize="true",
+                    canInterpolateInputs="false", providesDirectionalDerivative="false")
     _units_and_experiment(root, desc)
+    index = {v.value_reference: i + 1 for i, v in enumerate(desc.variables)}  # FMI 2 indices are 1-based
     variables = ET.SubElement(root, "ModelVariables")
     for v in desc.variables:
         sv = ET.SubElement(variables, "ScalarVariable", _attrs(
             name=v.name, valueReference=str(v.value_reference), description=v.description,
             causality=v.causality, variability=v.variability, initial=v.initial))
-        ET.SubElement(sv, v.type, _value_attrs(v))
-    index = {v.value_reference: i + 1 for i, v in enumerate(desc.variables)}  # FMI 2 indices are 1-based
+        derivative = None if v.derivative is None else str(index[v.derivative])
+        ET.SubElement(sv, v.type, _attrs(**_value_attrs(v), derivative=derivative))
     structure = ET.SubElement(root, "ModelStructure")
-    outputs = ET.SubElement(structure, "Outputs")
-    for v in desc.by_role("output"):
-        ET.SubElement(outputs, "Unknown", index=str(index[v.value_reference]), dependencies="")
-    initial = ET.SubElement(structure, "InitialUnknowns")
-    for v, s in zip(desc.by_role("output"), desc.by_role("output_start"), strict=True):
-        ET.SubElement(initial, "Unknown", index=str(index[v.value_reference]),
-                      dependencies=str(index[s.value_reference]))
+    for kind, tag in (("output", "Outputs"), ("derivative", "Derivatives"), ("initial", "InitialUnknowns")):
+        unknowns = desc.dependencies(kind)
+        if unknowns or kind != "derivative":
+            group = ET.SubElement(structure, tag)
+            for v, knowns in unknowns:
+                ET.SubElement(group, "Unknown", index=str(index[v.value_reference]),
+                              dependencies=" ".join(str(index[k]) for k in knowns))
     return _to_text(root)
 
 
@@ -253,8 +327,13 @@ _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
 
 
 def render_fmi3(desc: FmuDescription) -> str:
-    """modelDescription.xml for FMI 3.0 Co-Simulation (the sources are in sources/buildDescription.xml)."""
+    """modelDescription.xml for FMI 3.0 Co-Simulation (and Model Exchange for a continuous-time model; the
+    sources are in sources/buildDescription.xml)."""
     root = ET.Element("fmiModelDescription", _header_attrs(desc, "3.0"))
+    if desc.structure:
+        ET.SubElement(root, "ModelExchange", modelIdentifier=desc.model_identifier, canGetAndSetFMUState="true",
+                      canSerializeFMUState="true", providesDirectionalDerivatives="true",
+                      providesAdjointDerivatives="false", needsCompletedIntegratorStep="false")
     ET.SubElement(root, "CoSimulation", modelIdentifier=desc.model_identifier,
                   canHandleVariableCommunicationStepSize="true", fixedInternalStepSize=num(desc.spec.Ts),
                   canGetAndSetFMUState="true", canSerializeFMUState="true",
@@ -263,17 +342,19 @@ def render_fmi3(desc: FmuDescription) -> str:
     _units_and_experiment(root, desc)
     variables = ET.SubElement(root, "ModelVariables")
     for v in desc.variables:
+        derivative = None if v.derivative is None else str(v.derivative)
         element = ET.SubElement(variables, _FMI3_TYPES[v.type], _attrs(
             name=v.name, valueReference=str(v.value_reference), description=v.description,
-            causality=v.causality, variability=v.variability, initial=v.initial, **_value_attrs(v)))
+            causality=v.causality, variability=v.variability, initial=v.initial, **_value_attrs(v),
+            derivative=derivative))
         if v.size > 1 or v.role == "past":
             ET.SubElement(element, "Dimension", start=str(v.size))
     structure = ET.SubElement(root, "ModelStructure")
-    for v in desc.by_role("output"):
-        ET.SubElement(structure, "Output", valueReference=str(v.value_reference), dependencies="")
-    for v, s in zip(desc.by_role("output"), desc.by_role("output_start"), strict=True):
-        ET.SubElement(structure, "InitialUnknown", valueReference=str(v.value_reference),
-                      dependencies=str(s.value_reference))
+    for kind, tag in (("output", "Output"), ("derivative", "ContinuousStateDerivative"),
+                      ("initial", "InitialUnknown")):
+        for v, knowns in desc.dependencies(kind):
+            ET.SubElement(structure, tag, valueReference=str(v.value_reference),
+                          dependencies=" ".join(map(str, knowns)))
     return _to_text(root)
 
 

@@ -29,7 +29,7 @@ from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
 from nnfmu.physics import rk4_step
-from nnfmu.system import CasadiModel, SystemSpec, Variable
+from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables
 
 _VERIFY_RTOL = 1e-9
@@ -129,7 +129,23 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
                 "best_epoch": prov.get("best_epoch"), "summary": prov.get("summary", {}),
                 "dataset_source": prov.get("dataset_source", meta.get("source", {}))},
     )
-    return CasadiModel(init, step, spec)
+    return CasadiModel(init, step, spec, continuous=hybrid_dynamics(model))
+
+
+def hybrid_dynamics(model: HybridStepModel) -> ContinuousDynamics | None:
+    """``xdot = ode(x, u, p) + delta(x, u)`` and the physics' output map, for a derivative correction.
+
+    This is the ODE that the hybrid's RK4 step integrates, so its FMU offers Model Exchange too. A step
+    correction (``x_next = RK4(x) + Ts * delta``) is a discrete-time residual tied to Ts; no ODE has it as
+    its discretisation, so such a hybrid stays co-simulation only (None).
+    """
+    if model.config.correction != "derivative":
+        return None
+    system, delta = model.physics, _delta_function(model)
+    x, u, p = ca.MX.sym("x", model.n_x), ca.MX.sym("u", model.config.n_u), ca.MX.sym("p", len(system.parameters))
+    ode = ca.Function("ode", [x, u, p], [system.ode(x, u, p) + delta(x, u)], ["x", "u", "p"], ["xdot"])
+    output = ca.Function("output", [x, p], [system.output(x, p)], ["x", "p"], ["y"])
+    return ContinuousDynamics(ode=ode, output=output, states=system.states, nominals=system.state_scales)
 
 
 def _identifier(name: str) -> str:

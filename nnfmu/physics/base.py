@@ -26,7 +26,7 @@ import numpy as np
 
 from nnfmu.errors import ShapeError
 from nnfmu.physics.rk4 import rk4_function
-from nnfmu.system import CasadiModel, SystemSpec, Variable
+from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 
 __all__ = ["PhysicsSystem", "param", "parameter_variables", "unpack_parameters", "params_to_json"]
 
@@ -186,7 +186,20 @@ class PhysicsSystem:
         init = ca.Function("init", [y0, u] + extra, [x0], ["y0", "u0"] + extra_names, ["x0"])
         step = ca.Function("step", [x, u] + extra, [x_next, y_next], ["x", "u"] + extra_names,
                            ["x_next", "y_next"])
-        return CasadiModel(init=init, step=step, spec=self.spec(expose_parameters=expose_parameters))
+        return CasadiModel(init=init, step=step, spec=self.spec(expose_parameters=expose_parameters),
+                           continuous=self.dynamics(expose_parameters=expose_parameters))
+
+    def dynamics(self, *, expose_parameters: bool = True) -> ContinuousDynamics:
+        """The ODE and output map that :meth:`model` discretises (its FMU's Model Exchange interface).
+
+        ``ode(x, u(, p)) -> xdot`` and ``output(x(, p)) -> y``; ``expose_parameters`` as in :meth:`model`.
+        """
+        x, u, p_sym = ca.SX.sym("x", self.n_x), ca.SX.sym("u", len(self.inputs)), ca.SX.sym("p", len(self.parameters))
+        p = p_sym if expose_parameters else ca.DM(self.parameter_values())
+        extra, extra_names = ([p_sym], ["p"]) if expose_parameters else ([], [])
+        ode = ca.Function("ode", [x, u] + extra, [self.ode(x, u, p)], ["x", "u"] + extra_names, ["xdot"])
+        output = ca.Function("output", [x] + extra, [self.output(x, p)], ["x"] + extra_names, ["y"])
+        return ContinuousDynamics(ode=ode, output=output, states=self.states, nominals=self.state_scales)
 
     def simulate_states(self, x0, u, *, p=None, n_sub: int | None = None) -> np.ndarray:
         """States of an RK4 free run: ``x0`` (n_x,), ``u`` (N, n_u) -> x (N + 1, n_x), x[0] = x0.

@@ -12,11 +12,26 @@
  *                                                 inputs; compares them bitwise at every block end, then
  *                                                 asks the second for a step of 1e9 s
  *
- * Value references follow nnfmu's layout: inputs from 4 (2 of them), outputs right after. */
-#include <dlfcn.h>
+ * Value references follow nnfmu's layout: inputs from 4 (2 of them), outputs right after.
+ *
+ * The same source builds for Windows (LoadLibrary) and for other targets, so that the test suite runs
+ * cross-compiled FMU binaries with a driver of their own target (tests/test_fmu_platforms.py). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _WIN32
+#include <windows.h>
+static void *open_library(const char *path) { return (void *)LoadLibraryA(path); }
+static void *find_symbol(void *library, const char *name) { return (void *)GetProcAddress((HMODULE)library, name); }
+static const char *open_error(void) { return "LoadLibraryA failed"; }
+static const char *libm_loaded(void) { return "no (Windows: the maths is in the C runtime)"; }
+#else
+#include <dlfcn.h>
+static void *open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void *find_symbol(void *library, const char *name) { return dlsym(library, name); }
+static const char *open_error(void) { return dlerror(); }
+static const char *libm_loaded(void) { return dlopen("libm.so.6", RTLD_LAZY | RTLD_NOLOAD) ? "yes" : "no"; }
+#endif
 
 #include "fmi2FunctionTypes.h"
 #include "fmi3FunctionTypes.h"
@@ -32,7 +47,7 @@ static const char *token;
 static double Ts;
 
 static void *must(const char *name) {
-  void *f = dlsym(lib, name);
+  void *f = find_symbol(lib, name);
   if (!f) { printf("missing symbol %s\n", name); exit(3); }
   return f;
 }
@@ -171,9 +186,9 @@ static int schedule(long long n, long long block, double t0) {
 
 int main(int argc, char **argv) {
   if (argc < 7) { printf("usage: fmu_driver LIB TOKEN VERSION TS run N | schedule N BLOCK\n"); return 2; }
-  printf("libm loaded before the FMU: %s\n", dlopen("libm.so.6", RTLD_LAZY | RTLD_NOLOAD) ? "yes" : "no");
-  lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-  if (!lib) { printf("dlopen failed: %s\n", dlerror()); return 1; }
+  printf("libm loaded before the FMU: %s\n", libm_loaded());
+  lib = open_library(argv[1]);
+  if (!lib) { printf("loading %s failed: %s\n", argv[1], open_error()); return 1; }
   token = argv[2];
   version = atoi(argv[3]);
   Ts = strtod(argv[4], NULL);

@@ -8,6 +8,9 @@
 
 #include "nnfmu_instance.h"
 #include "nnfmu_libm.h" /* math.h: NAN */
+#ifdef NNFMU_MODEL_EXCHANGE
+#include "nnfmu_me.h"
+#endif
 
 /* ---- logging ------------------------------------------------------------------------------- */
 
@@ -63,6 +66,8 @@ static const char *mode_name(int mode) {
     case MODE_INITIALIZATION: return "initialization mode";
     case MODE_STEP: return "step mode";
     case MODE_TERMINATED: return "the terminated state";
+    case MODE_EVENT: return "event mode";
+    case MODE_CONTINUOUS: return "continuous-time mode";
     default: return "the error state (after an error: call reset, or set an FMU state saved before)";
   }
 }
@@ -71,7 +76,7 @@ nnfmu_status nnfmu_require(nnfmu_instance *inst, const char *caller, int modes) 
   char allowed[200] = "";
   int m;
   if (inst->v.mode & modes) return NNFMU_OK;
-  for (m = MODE_INSTANTIATED; m <= MODE_ERROR; m <<= 1)
+  for (m = MODE_INSTANTIATED; m <= MODE_CONTINUOUS; m <<= 1)
     if (modes & m) {
       if (allowed[0]) strcat(allowed, ", ");
       strcat(allowed, m == MODE_ERROR ? "the error state" : mode_name(m));
@@ -98,6 +103,16 @@ static int allocate_work(nnfmu_instance *inst) {
   return inst->arg && inst->res && inst->iw && inst->w;
 }
 
+/* FMUs of continuous-time models: every instance, of either interface, gets the ODE's workspace. */
+static int allocate_model_exchange(nnfmu_instance *inst) {
+#ifdef NNFMU_MODEL_EXCHANGE
+  return nnfmu_me_enable(inst);
+#else
+  (void)inst;
+  return 1;
+#endif
+}
+
 nnfmu_instance *nnfmu_instantiate(const char *instance_name, const char *token, nnfmu_log_sink sink,
                                   void *env, int logging_on) {
   nnfmu_instance *inst;
@@ -115,7 +130,7 @@ nnfmu_instance *nnfmu_instantiate(const char *instance_name, const char *token, 
   }
   inst = (nnfmu_instance *)calloc(1, sizeof *inst);
   if (inst) inst->name = (char *)malloc(strlen(name) + 1);
-  if (!inst || !inst->name || !allocate_work(inst)) {
+  if (!inst || !inst->name || !allocate_work(inst) || !allocate_model_exchange(inst)) {
     nnfmu_log_early(sink, env, name, "instantiate: out of memory");
     nnfmu_free(inst);
     return NULL;
@@ -135,6 +150,7 @@ void nnfmu_free(nnfmu_instance *inst) {
   free(inst->res);
   free(inst->iw);
   free(inst->w);
+  free(inst->me);
   free(inst);
 }
 
@@ -178,12 +194,15 @@ nnfmu_status nnfmu_exit_initialization(nnfmu_instance *inst, const char *caller)
     if (!(inst->v.y_start[i] - inst->v.y_start[i] == 0.0))
       return nnfmu_error(inst, "%s: %s (the initial output) must be finite but was %g", caller,
                          nnfmu_y_start_names[i], inst->v.y_start[i]);
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (nnfmu_me_interface(inst)) return nnfmu_me_exit_initialization(inst);
+#endif
   inst->v.mode = MODE_STEP;
   return NNFMU_OK;
 }
 
 nnfmu_status nnfmu_terminate(nnfmu_instance *inst, const char *caller) {
-  if (nnfmu_require(inst, caller, MODE_STEP) != NNFMU_OK) return NNFMU_ERROR;
+  if (nnfmu_require(inst, caller, MODE_STEP | MODE_EVENT | MODE_CONTINUOUS) != NNFMU_OK) return NNFMU_ERROR;
   inst->v.mode = MODE_TERMINATED;
   return NNFMU_OK;
 }
@@ -211,8 +230,8 @@ static const var_group groups[] = {
   {NNFMU_VR_PAST, NNFMU_N_PAST_VR, KIND_FIXED, offsetof(nnfmu_values, past), nnfmu_past_names, NNFMU_PAST_PER_VR},
 };
 
-#define READABLE (MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR)
-#define TUNABLE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP)
+#define READABLE (MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR | MODE_EVENT | MODE_CONTINUOUS)
+#define TUNABLE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_EVENT | MODE_CONTINUOUS)
 #define FIXED (MODE_INSTANTIATED | MODE_INITIALIZATION)
 
 static const var_group *find_group(unsigned long vr, int *index) {
@@ -240,6 +259,12 @@ static nnfmu_status unknown_vr(nnfmu_instance *inst, const char *caller, unsigne
                      vr, NNFMU_N_VR - 1);
 }
 
+/* Model Exchange: parameters change in event mode only, where the importer restarts its solver. */
+static nnfmu_status parameter_in_continuous_time(nnfmu_instance *inst, const char *caller) {
+  return nnfmu_error(inst, "%s: parameters can be set in event mode but not in continuous-time mode; call "
+                     "enterEventMode first", caller);
+}
+
 static nnfmu_status wrong_type(nnfmu_instance *inst, const char *caller, unsigned long vr) {
   const char *what = vr == NNFMU_VR_MAX_SAMPLES ? "max_samples_per_step is an Integer (FMI 3: Int32)"
                      : vr == NNFMU_VR_RANGE_ERROR ? "input_range_error is a Boolean"
@@ -251,6 +276,9 @@ nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned l
   int i, k;
   const var_group *g;
   if (nnfmu_require(inst, caller, READABLE) != NNFMU_OK) return NNFMU_ERROR;
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (nnfmu_me_owns(inst, vr)) return nnfmu_me_get_real(inst, caller, vr, value);
+#endif
   if (vr == NNFMU_VR_TIME) *value = inst->v.time;
   else if (vr == NNFMU_VR_TS) *value = NNFMU_TS;
   else if ((g = find_group(vr, &i)) == NULL)
@@ -270,6 +298,9 @@ nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned l
   if (vr == NNFMU_VR_TS)
     return nnfmu_error(inst, "%s: Ts (value reference 1) is a constant, Ts = %g s, and cannot be set", caller,
                        NNFMU_TS);
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (nnfmu_me_owns(inst, vr) && !nnfmu_is_output(vr)) return nnfmu_me_refuse_set(inst, caller, vr);
+#endif
   if ((g = find_group(vr, &i)) == NULL)
     return vr == NNFMU_VR_MAX_SAMPLES || vr == NNFMU_VR_RANGE_ERROR ? wrong_type(inst, caller, vr)
                                                                      : unknown_vr(inst, caller, vr);
@@ -279,6 +310,7 @@ nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned l
   if (g->kind == KIND_FIXED && !(inst->v.mode & FIXED))
     return nnfmu_error(inst, "%s: %s is a fixed parameter; set it before exitInitializationMode, or call reset "
                        "first", caller, g->names[i]);
+  if (g->kind == KIND_TUNABLE && inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
   for (k = 0; k < g->size; ++k) group_values(&inst->v, g)[i * g->size + k] = value[k];
   return NNFMU_OK;
 }
@@ -295,6 +327,7 @@ nnfmu_status nnfmu_get_int(nnfmu_instance *inst, const char *caller, nnfmu_int_t
 nnfmu_status nnfmu_set_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type, unsigned long vr,
                            long long value) {
   if (nnfmu_require(inst, caller, TUNABLE) != NNFMU_OK) return NNFMU_ERROR;
+  if (inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
   if (type == NNFMU_INTEGER && vr == NNFMU_VR_MAX_SAMPLES) {
     if (value < 1)
       return nnfmu_error(inst, "%s: max_samples_per_step must be at least 1 but was %lld", caller, value);

@@ -1,24 +1,18 @@
 /* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
- * FMI 2 types and calls the core, which checks the state machine and does the work. */
+ * FMI 2 types and calls the core, which checks the state machine and does the work. FMUs of
+ * continuous-time models add the Model Exchange entry points of nnfmu_fmi2_me.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
-#include "fmi2Functions.h"
-#include "nnfmu_core.h"
-
-/* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
-typedef struct {
-  fmi2CallbackLogger logger;
-  fmi2ComponentEnvironment environment;
-} logger_env;
-
-typedef struct {
-  logger_env le;
-  nnfmu_instance *core;
-} fmi2_instance;
-
-#define INSTANCE (((fmi2_instance *)c)->core)
-#define CHECK_INSTANCE() if (!c) return fmi2Error
+#include "nnfmu_fmi2.h"
+#ifdef NNFMU_MODEL_EXCHANGE
+#include "nnfmu_me.h"
+#define INTERFACES "co-simulation and model exchange"
+#define OFFERED(type) ((type) == fmi2CoSimulation || (type) == fmi2ModelExchange)
+#else
+#define INTERFACES "co-simulation only (fmuType = fmi2CoSimulation)"
+#define OFFERED(type) ((type) == fmi2CoSimulation)
+#endif
 
 /* The core hands over finished messages; FMI 2 loggers read them as printf formats (the core removed
  * every '%'), so the message itself is the format. */
@@ -40,9 +34,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
   (void)visible;
   le.logger = functions ? functions->logger : NULL;
   le.environment = functions ? functions->componentEnvironment : NULL;
-  if (fmuType != fmi2CoSimulation) {
-    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName,
-                    "fmi2Instantiate: this FMU supports co-simulation only (fmuType = fmi2CoSimulation)");
+  if (!OFFERED(fmuType)) {
+    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName, "fmi2Instantiate: this FMU supports " INTERFACES);
     return NULL;
   }
   inst = (fmi2_instance *)calloc(1, sizeof *inst);
@@ -53,6 +46,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     free(inst);
     return NULL;
   }
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (fmuType == fmi2ModelExchange) nnfmu_me_select(inst->core);
+#endif
   return inst;
 }
 
@@ -202,12 +198,14 @@ static fmi2Status unsupported(fmi2Component c, const char *caller, const char *w
   return (fmi2Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi2_me.c */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
   (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
   return unsupported(c, "fmi2GetDirectionalDerivative", "providesDirectionalDerivative is false");
 }
+#endif
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {

@@ -1,14 +1,14 @@
 /* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
- * FMI 3 types and calls the core, which checks the state machine and does the work. There is no event
- * mode and no model exchange. Every FMI 3 function is exported (importers look them all up); those
- * that do not apply are in nnfmu_fmi3_unsupported.c. */
+ * FMI 3 types and calls the core, which checks the state machine and does the work. Co-simulation has no
+ * event mode; FMUs of continuous-time models add Model Exchange (nnfmu_fmi3_me.c). Every FMI 3 function
+ * is exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
 #include "nnfmu_fmi3.h"
 
-static void fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
-                      const char *message) {
+void nnfmu_fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
+                     const char *message) {
   const logger_env *le = (const logger_env *)env;
   (void)instance_name;
   le->log_message(le->environment, (fmi3Status)status, category, message);
@@ -45,14 +45,14 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
   if (eventModeUsed) {
-    nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateCoSimulation: "
+    nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateCoSimulation: "
                     "eventModeUsed must be false (hasEventMode is false) but was true");
     return NULL;
   }
   inst = (fmi3_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
   inst->le = le;
-  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? fmi3_sink : NULL, &inst->le,
+  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
                                  loggingOn);
   if (!inst->core) {
     free(inst);
@@ -61,6 +61,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   return inst;
 }
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
@@ -69,9 +70,10 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
   (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
+  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
   return NULL;
 }
+#endif
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
                                                fmi3String resourcePath, fmi3Boolean visible,
@@ -84,7 +86,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
   (void)lockPreemption; (void)unlockPreemption;
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
+  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
   return NULL;
 }
 

@@ -4,6 +4,7 @@
 
 #include "fmi3Functions.h"
 #include "nnfmu_core.h"
+#include "nnfmu_model.h" /* NNFMU_MODEL_EXCHANGE: this FMU offers Model Exchange too (nnfmu_fmi3_me.c) */
 
 /* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
 typedef struct {
@@ -20,6 +21,9 @@ typedef struct {
 #define CHECK_INSTANCE() if (!instance) return fmi3Error
 
 #define NO_MX "this FMU is for co-simulation only"
+/* The FMI 3 logger sink, shared with nnfmu_fmi3_me.c's instantiate. */
+NNFMU_INTERNAL void nnfmu_fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
+                                    const char *message);
 #define NO_CLOCKS "this FMU has no clocks and no event mode"
 #define NO_TYPE "this FMU has Float64, Int32 and Boolean variables only"
 

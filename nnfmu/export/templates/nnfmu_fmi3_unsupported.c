@@ -6,9 +6,11 @@
 
 #define U(x) (void)(x)
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EnterEventMode", NO_CLOCKS);
 }
+#endif
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EnterStepMode",
                                 "without event mode the FMU is in step mode after initialization");
@@ -22,6 +24,7 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EvaluateDiscreteStates", NO_CLOCKS);
 }
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
@@ -30,7 +33,9 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
   U(valuesOfContinuousStatesChanged); U(nextEventTimeDefined); U(nextEventTime);
   return nnfmu_fmi3_unsupported(instance, "fmi3UpdateDiscreteStates", NO_CLOCKS);
 }
+#endif
 
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
@@ -38,6 +43,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
   return nnfmu_fmi3_unsupported(instance, "fmi3GetDirectionalDerivative",
                                 "providesDirectionalDerivatives is false");
 }
+#endif
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
@@ -100,6 +106,7 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
 }
 
 /* Model exchange. */
+#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EnterContinuousTimeMode", NO_MX);
 }
@@ -142,3 +149,4 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
   U(nContinuousStates);
   return nnfmu_fmi3_unsupported(instance, "fmi3GetNumberOfContinuousStates", NO_MX);
 }
+#endif /* NNFMU_MODEL_EXCHANGE */

@@ -15,9 +15,12 @@ typedef enum {
   MODE_INITIALIZATION = 2,
   MODE_STEP = 4,
   MODE_TERMINATED = 8,
-  MODE_ERROR = 16
+  MODE_ERROR = 16,
+  MODE_EVENT = 32,     /* Model Exchange (nnfmu_me.c) */
+  MODE_CONTINUOUS = 64 /* Model Exchange: continuous-time mode */
 } nnfmu_mode;
-#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR)
+#define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR | MODE_EVENT | \
+                  MODE_CONTINUOUS)
 
 /* Everything that changes while simulating: exactly what an FMU state snapshot holds. */
 typedef struct {
@@ -51,6 +54,7 @@ struct nnfmu_instance {
   casadi_real **res;
   casadi_int *iw;
   casadi_real *w;
+  void *me; /* the Model Exchange workspace (nnfmu_me.c) in FMUs of continuous-time models, else NULL */
   char message[1024];
 };
 
@@ -60,5 +64,7 @@ NNFMU_INTERNAL nnfmu_status nnfmu_log(nnfmu_instance *inst, nnfmu_status status,
 NNFMU_INTERNAL nnfmu_status nnfmu_require(nnfmu_instance *inst, const char *caller, int modes);
 /* The values of a freshly instantiated (or reset) instance. */
 NNFMU_INTERNAL void nnfmu_start_values(nnfmu_values *v);
+/* Inputs and parameters finite (else an Error) and inputs inside [min, max] (else a Warning or an Error). */
+NNFMU_INTERNAL nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t);
 
 #endif /* NNFMU_INSTANCE_H */

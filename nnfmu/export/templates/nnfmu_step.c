@@ -82,6 +82,11 @@ static nnfmu_status check_range(nnfmu_instance *inst, const char *caller, double
   return status;
 }
 
+nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t) {
+  if (check_finite(inst, caller, t) != NNFMU_OK) return NNFMU_ERROR;
+  return check_range(inst, caller, t);
+}
+
 /* init's window in CasADi's layout (y_past, u_past: sample by sample, oldest first) from the parameters
  * <c>_past (channel by channel); a sample not set (NaN) is the rest state: y0, or the first input u0.
  * Returns the index of an infinite value of the parameters, or -1. */
