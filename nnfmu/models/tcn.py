@@ -62,10 +62,11 @@ class TCNStepModel(WindowStepModel):
         conv = self.convs[i]
         k, d = conv.kernel_size[0], conv.dilation[0]
         n_out = h.shape[1] - (k - 1) * d
-        taps = torch.stack([h[:, j * d:j * d + n_out] for j in range(k)], dim=2)  # (B, n_out, k, C)
-        if i == 0 and self.config.increment:
-            taps = tcn_state.relative_taps(taps, self.config.n_y)
-        taps = taps.transpose(2, 3)  # (B, n_out, C, k)
+        shifted = [h[:, j * d:j * d + n_out] for j in range(k)]
+        if i == 0 and self.config.increment:  # (B, n_out, k, C) made relative, then as below
+            taps = tcn_state.relative_taps(torch.stack(shifted, dim=2), self.config.n_y).transpose(2, 3)
+        else:
+            taps = torch.stack(shifted, dim=3)  # (B, n_out, C, k)
         # (B, n_out, C*k) channel-major matches the (H, C, k) weight viewed as (H, C*k): no weight copy
         return F.linear(taps.reshape(*taps.shape[:2], -1), conv.weight.view(conv.out_channels, -1), conv.bias)
 
