@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from nnfmu.cli import main
 from nnfmu.cosim import FmuSimulator, inspect_fmu

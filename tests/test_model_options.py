@@ -14,7 +14,7 @@ import torch
 import nnfmu.models
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.export import casadi_model
-from nnfmu.models import ARCHS, EnsembleStepModel, ModelConfig, StepModel, build_model
+from nnfmu.models import ARCHS, EnsembleStepModel, ModelConfig, StepModel
 from tests.test_models import N_U, N_Y, make_model, random_io
 
 N = 6  # init window
