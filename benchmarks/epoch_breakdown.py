@@ -33,7 +33,7 @@ def one_epoch(model, seqs, valid, optimiser, batch: int, truncate: int | None, s
     """CPU seconds per part of one epoch, and the trajectory-steps trained."""
     spent, steps, clock = dict.fromkeys(PARTS, 0.0), 0, time.process_time
     model.train()
-    rollout = training_rollout(model, "parallel")
+    rollout = training_rollout(model)
     batches = iter(epoch_batches(seqs, batch_size=batch, truncate=truncate,
                                  generator=torch.Generator().manual_seed(seed)))
     while True:

@@ -72,7 +72,7 @@ def variants(kind: str, model, threads: int | None) -> dict:
     if kind == "paths":
         model.train()
         return {"torch free run, AdamW": (parallel, one, plain_adamw),
-                "compiled free run, fused AdamW": (training_rollout(model, "parallel"), one, nnfmu_adamw)}
+                "compiled free run, fused AdamW": (training_rollout(model), one, nnfmu_adamw)}
     return {"parallel": (parallel, one, plain_adamw),
             "series-parallel": (lambda u, y: model.rollout_normalised(u, y[:, 0], y), one, plain_adamw)}
 

@@ -8,10 +8,11 @@ Public API (names are imported on first use, so ``import nnfmu`` stays light):
 - scoring: :func:`nrmse`; :func:`evaluate` (co-simulate FMUs in fmpy on a dataset split and score them)
 - export: :func:`casadi_model` (a trained network as CasADi ``(init, step)``), :func:`build_fmu`
 - the study: :func:`reproduce` (``nnfmu reproduce``), :func:`run_demo` (``nnfmu demo``)
-- models and training: :class:`ModelConfig`, :class:`TrainConfig`, :func:`train`,
-  :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
+- models and training: :class:`ModelConfig`, :class:`TrainConfig`, :func:`train`, :func:`train_seeds`
+  (K seeds: the best or their ensemble), :func:`load_model` (a trained checkpoint; ``model.simulate(u, y0)``)
 - linear baseline: :func:`identify_linear`, :class:`LinearModel`, :func:`load_linear`
-- physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`; :func:`sx_to_torch`
+- physics: :func:`generate_dataset`, :func:`valve_system`, :func:`arm_system`, :func:`slider_system`;
+  :func:`sx_to_torch`
 - the model contract: :class:`CasadiModel`, :class:`SystemSpec`, :class:`Variable`,
   :class:`ContinuousDynamics` (the ODE of a continuous-time model)
 - errors: :mod:`nnfmu.errors` (:class:`NnfmuError` and its subclasses)
@@ -44,10 +45,12 @@ _LAZY = {
     "load_model": "nnfmu.models",
     "ModelConfig": "nnfmu.models",
     "train": "nnfmu.training",
+    "train_seeds": "nnfmu.training",
     "TrainConfig": "nnfmu.training",
     "generate_dataset": "nnfmu.physics",
     "valve_system": "nnfmu.physics",
     "arm_system": "nnfmu.physics",
+    "slider_system": "nnfmu.physics",
     "sx_to_torch": "nnfmu.hybrid",
     "HybridConfig": "nnfmu.hybrid",
     "identify_linear": "nnfmu.linear",

@@ -28,8 +28,10 @@ import numpy as np
 
 from nnfmu.data import Dataset
 from nnfmu.errors import DataError, DataFileError, SimulationError
-from nnfmu.metrics import NrmseResult, nrmse
+from nnfmu.metrics import NrmseResult
+from nnfmu.protocols import Protocol
 from nnfmu.valid_range import OutOfRange, count_outside
+from nnfmu.window_names import fmu_init_window, window_start_values
 
 _TS_RTOL = 1e-9
 # fmpy's FMI 2 logger proxy keeps a C-global pointer to the most recent logger callback; if that
@@ -50,6 +52,7 @@ class FmuInfo:
     outputs: tuple[str, ...]
     parameters: tuple[str, ...]
     input_ranges: dict = field(default_factory=dict)  # input name -> (min, max), None where undeclared
+    init_window: int = 1  # samples its init sees: 1 + its window parameters per channel (nnfmu.window_names)
 
 
 def inspect_fmu(path: str | os.PathLike) -> FmuInfo:
@@ -72,8 +75,9 @@ def inspect_fmu(path: str | os.PathLike) -> FmuInfo:
         by_causality.setdefault(v.causality, []).append(v.name)
     ranges = {v.name: tuple(None if b is None else float(b) for b in (v.min, v.max))
               for v in md.modelVariables if v.causality == "input"}
-    return FmuInfo(path, md.modelName, md.fmiVersion, Ts, tuple(by_causality.get("input", [])),
-                   tuple(by_causality.get("output", [])), tuple(by_causality.get("parameter", [])), ranges)
+    outputs = tuple(by_causality.get("output", []))
+    return FmuInfo(path, md.modelName, md.fmiVersion, Ts, tuple(by_causality.get("input", [])), outputs,
+                   tuple(by_causality.get("parameter", [])), ranges, fmu_init_window(md, outputs))
 
 
 def check_compatible(info: FmuInfo, dataset: Dataset) -> None:
@@ -124,7 +128,10 @@ class FmuSimulator:
         msg = args[-1]
         self.messages.append(msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg))
 
-    def simulate(self, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    def simulate(self, u: np.ndarray, y0: np.ndarray, y_past: np.ndarray | None = None,
+                 u_past: np.ndarray | None = None) -> np.ndarray:
+        """``y_past`` (N-1, n_y), ``u_past`` (N-1, n_u): the samples before t0, set as the FMU's window
+        parameters (an FMU with an init window of N samples; :mod:`nnfmu.window_names`)."""
         from fmpy import simulate_fmu
 
         u = np.asarray(u, dtype=float)
@@ -134,6 +141,8 @@ class FmuSimulator:
         for j, name in enumerate(self.input_names):
             table[name] = u[:, j]
         start = {f"{name}_start": float(v) for name, v in zip(self.output_names, np.ravel(y0))}
+        if y_past is not None:
+            start.update(window_start_values(self.info, self.output_names, self.input_names, y_past, u_past))
         if self._used:
             self._fmu.reset()
         self._used = True
@@ -166,8 +175,12 @@ class FmuSimulator:
 
 
 def simulate_split(path: str | os.PathLike, dataset: Dataset, split: str = "test",
-                   progress: bool = False) -> list[np.ndarray]:
-    """Simulate the FMU at ``path`` on every trajectory of ``split``; one (N_i, n_y) array each."""
+                   progress: bool = False, protocol: Protocol = Protocol()) -> list[np.ndarray]:
+    """Simulate the FMU at ``path`` on every trajectory of ``split`` under ``protocol``.
+
+    One array per trajectory of the samples the protocol scores (the default free run: all
+    ``N_i`` samples, the first being y0).
+    """
     info = inspect_fmu(path)
     check_compatible(info, dataset)
     trajectories = dataset.split(split)
@@ -179,7 +192,7 @@ def simulate_split(path: str | os.PathLike, dataset: Dataset, split: str = "test
 
             items = tqdm(items, total=trajectories.n_traj, desc=Path(path).name, leave=False)
         for u, y in items:
-            out.append(sim.simulate(u, y[0]))
+            out.append(protocol.predict(sim.simulate, u, y, info.init_window - 1))
     return out
 
 
@@ -202,11 +215,14 @@ class Evaluation:
 
 
 def evaluate(paths: Sequence[str | os.PathLike], dataset: Dataset, split: str = "test",
-             names: Sequence[str] | None = None, progress: bool = False) -> list[Evaluation]:
+             names: Sequence[str] | None = None, progress: bool = False,
+             protocol: Protocol = Protocol()) -> list[Evaluation]:
     """Co-simulate every FMU on ``split`` and score it with :func:`nnfmu.metrics.nrmse`.
 
     ``names`` label the FMUs (default: file stem). All FMUs are checked against
     the dataset before the first one is simulated, so a mismatch fails fast.
+    ``protocol``: the free run from y0 (default), after an init window, or H-step-ahead
+    (:mod:`nnfmu.protocols`); the predictions cover the samples it scores.
     """
     paths = [Path(p) for p in paths]
     names = list(names) if names is not None else [p.stem for p in paths]
@@ -216,7 +232,7 @@ def evaluate(paths: Sequence[str | os.PathLike], dataset: Dataset, split: str = 
         check_compatible(info, dataset)
     out = []
     for name, p, info in zip(names, paths, infos):
-        pred = simulate_split(p, dataset, split, progress=progress)
+        pred = simulate_split(p, dataset, split, progress=progress, protocol=protocol)
         outside = count_outside(inputs, dataset.input_names, info.input_ranges)
-        out.append(Evaluation(name, p, nrmse(list(measured), pred), pred, outside))
+        out.append(Evaluation(name, p, protocol.score(list(measured), pred), pred, outside))
     return out

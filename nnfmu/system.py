@@ -3,7 +3,8 @@
 docs/design.md's "one idea": the networks, the linear baseline, the physics models
 (discretised with a fixed-step RK4) and hybrids all reduce to::
 
-    init(y0, u0)     -> x0                 # (p) optional parameter vector as a 3rd input
+    init(y0, u0)     -> x0                 # (p) optional parameter vector as a 3rd input;
+                                           # (y_past, u_past) last, for an init window (below)
     step(x, u)       -> (x_next, y_next)   # one sample period Ts; y_next is y(t + Ts)
 
 as CasADi Functions with exactly those port names. :class:`CasadiModel` bundles
@@ -18,6 +19,10 @@ Conventions
 - ``simulate(u, y0)`` returns ``N`` rows for ``N`` input rows; ``u[N-1]`` is
   not used (it would only influence ``y[N]``).
 - Everything is in physical units; normalisation lives inside the functions.
+- A model with an init window of ``N > 1`` samples (``spec.init_window``) also takes the
+  ``N - 1`` samples before ``y0`` and ``u0``: ``init(y0, u0[, p], y_past, u_past)`` with
+  ``y_past`` ``((N-1) n_y,)`` and ``u_past`` ``((N-1) n_u,)``, oldest sample first. Without
+  them the plant is taken at rest: ``y0`` and ``u0`` repeated.
 """
 
 from __future__ import annotations
@@ -92,6 +97,8 @@ class SystemSpec:
         One line for humans (the FMU's description).
     source : dict
         Provenance (checkpoint, dataset, training figures), JSON-serialisable.
+    init_window : int
+        ``N``: samples ``init`` sees (1: ``y0`` and ``u0``; more: also ``y_past``, ``u_past``).
     """
 
     name: str
@@ -101,8 +108,11 @@ class SystemSpec:
     parameters: tuple[Variable, ...] = ()
     description: str = ""
     source: dict = field(default_factory=dict)
+    init_window: int = 1
 
     def __post_init__(self) -> None:
+        if isinstance(self.init_window, bool) or not isinstance(self.init_window, int) or self.init_window < 1:
+            raise ShapeError(f"init_window must be a positive integer number of samples, got {self.init_window!r}")
         for attr in ("inputs", "outputs", "parameters"):
             object.__setattr__(self, attr, tuple(_as_variable(v) for v in getattr(self, attr)))
         if not self.name.isidentifier():
@@ -111,9 +121,12 @@ class SystemSpec:
             raise ShapeError(f"sample time Ts must be positive seconds, got {self.Ts!r}")
         names = [v.name for v in self.inputs + self.outputs + self.parameters]
         names += [f"{v.name}_start" for v in self.outputs]
+        if self.init_window > 1:  # the FMU's init-window parameters (nnfmu.window_names)
+            names += [f"{v.name}_past" for v in self.outputs + self.inputs]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ShapeError(f"variable names must be unique (outputs also claim '<name>_start'); repeated: {dup}")
+            raise ShapeError(f"variable names must be unique (outputs also claim '<name>_start', and with an init "
+                             f"window every channel '<name>_past'); repeated: {dup}")
 
     @property
     def n_u(self) -> int:
@@ -187,10 +200,30 @@ class CasadiModel:
             raise ShapeError(f"p has {p.size} values, expected {self.spec.n_p} ({[v.name for v in self.spec.parameters]})")
         return p
 
-    def simulate(self, u, y0, p: Sequence[float] | None = None) -> np.ndarray:
+    def past_window(self, y0, u0, y_past=None, u_past=None) -> list[np.ndarray]:
+        """The ``init`` arguments after ``y0``, ``u0`` (and ``p``): ``[y_past, u_past]`` flattened, or ``[]``.
+
+        ``y_past`` (N-1, n_y) and ``u_past`` (N-1, n_u), oldest first; default the rest state repeated.
+        """
+        n_past, spec = self.spec.init_window - 1, self.spec
+        if n_past == 0:
+            if y_past is not None or u_past is not None:
+                raise ShapeError(f"{spec.name} has no init window (init_window 1); drop y_past and u_past")
+            return []
+        out = []
+        for name, given, rest, width in (("y_past", y_past, y0, spec.n_y), ("u_past", u_past, u0, spec.n_u)):
+            a = np.tile(np.ravel(rest), (n_past, 1)) if given is None else np.asarray(given, dtype=float)
+            if a.shape != (n_past, width):
+                raise ShapeError(f"{name} has shape {a.shape}, expected {(n_past, width)}: the init_window - 1 "
+                                 "samples before t0, oldest first")
+            out.append(a.ravel())
+        return out
+
+    def simulate(self, u, y0, p: Sequence[float] | None = None, *, y_past=None, u_past=None) -> np.ndarray:
         """Free run: ``u`` (N, n_u) and ``y0`` (n_y,) in physical units -> y (N, n_y), y[0] = y0.
 
-        Uses ``step.mapaccum`` so that the loop runs inside CasADi, in float64.
+        ``y_past``, ``u_past``: the samples before t0 of a model with an init window (see
+        :meth:`past_window`). Uses ``step.mapaccum`` so that the loop runs inside CasADi, in float64.
         """
         u = np.asarray(u, dtype=float)
         y0 = np.asarray(y0, dtype=float).ravel()
@@ -199,7 +232,7 @@ class CasadiModel:
         if y0.shape != (self.spec.n_y,):
             raise ShapeError(f"y0 has shape {y0.shape}, expected ({self.spec.n_y},)")
         extra = [self.parameter_values(p)] if self.spec.n_p else []
-        x0 = self.init(y0, u[0], *extra)
+        x0 = self.init(y0, u[0], *extra, *self.past_window(y0, u[0], y_past, u_past))
         n = u.shape[0]
         if n == 1:
             return y0[None, :].copy()
@@ -210,8 +243,8 @@ class CasadiModel:
 
 def check_pair(init: ca.Function, step: ca.Function, spec: SystemSpec) -> None:
     """Check port names and sizes of an ``(init, step)`` pair against ``spec``; raise ShapeError."""
-    with_p = spec.n_p > 0
-    want_init = (["y0", "u0"] + (["p"] if with_p else []), ["x0"])
+    with_p, n_past = spec.n_p > 0, spec.init_window - 1
+    want_init = (["y0", "u0"] + (["p"] if with_p else []) + (["y_past", "u_past"] if n_past else []), ["x0"])
     want_step = (["x", "u"] + (["p"] if with_p else []), ["x_next", "y_next"])
     for fn, (ins, outs) in ((init, want_init), (step, want_step)):
         if fn.name_in() != ins or fn.name_out() != outs:
@@ -228,6 +261,10 @@ def check_pair(init: ca.Function, step: ca.Function, spec: SystemSpec) -> None:
     if with_p:
         sizes["init p"] = (init.size_in(2), spec.n_p)
         sizes["step p"] = (step.size_in(2), spec.n_p)
+    if n_past:
+        first = 3 if with_p else 2
+        sizes["init y_past"] = (init.size_in(first), n_past * spec.n_y)
+        sizes["init u_past"] = (init.size_in(first + 1), n_past * spec.n_u)
     for what, (got, n) in sizes.items():
         if tuple(got) != (n, 1):
             raise ShapeError(f"{what} has shape {tuple(got)}, expected ({n}, 1) for the spec {spec.name!r}")

@@ -53,6 +53,26 @@ def test_compiled_free_run_and_its_gradients_equal_torch_in_float64(arch, activa
         assert torch.allclose(a, b, rtol=0, atol=1e-12 * float(b.abs().max()))
 
 
+@pytest.mark.parametrize("option", ["increment", "init_window", "feedback_noise"])
+def test_a_training_free_run_with_an_option_the_c_code_lacks_is_torch_s(option):
+    """The issue-11 options (increment readout, encoder initial state, noise on the fed-back output) are
+    computed by torch, not silently dropped by the compiled free run."""
+    torch.manual_seed(0)
+    config = ModelConfig(arch="gru", n_u=3, n_y=2, hidden=8, skip=True, increment=option == "increment",
+                         init_window=4 if option == "init_window" else 1)
+    model = build_model(config).double().train()
+    model.feedback_noise = 0.3 if option == "feedback_noise" else 0.0
+    g = torch.Generator().manual_seed(1)
+    un, yn = torch.randn(5, 40, 3, generator=g, dtype=torch.float64), torch.randn(5, 40, 2, generator=g,
+                                                                                 dtype=torch.float64)
+    past = (yn[:, :3], un[:, :3]) if option == "init_window" else None
+    torch.manual_seed(2)
+    got = cr.training_rollout(model)(un[:, 3:], yn[:, 3:], past)
+    torch.manual_seed(2)
+    wanted = model.rollout_normalised(un[:, 3:], yn[:, 3, :], None, past)
+    assert torch.equal(got, wanted)
+
+
 def test_the_free_run_in_physical_units_takes_the_compiled_path_and_agrees(valve_small):
     model = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, hidden=8), norm=valve_small.norm_stats("train"))
     test = valve_small.test

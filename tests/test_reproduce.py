@@ -37,7 +37,7 @@ def _table_i(md: str) -> dict[str, tuple[str, str]]:
 
 def _cell(text: str) -> tuple[float, bool, bool]:
     """A Table I cell such as ``**0.480***`` -> (value, bold, starred)."""
-    m = re.fullmatch(r"(\*\*)?([0-9.]+)(\*\*)?(\*)?", text)
+    m = re.fullmatch(r"(\*\*)?([0-9.]+)(\*\*)?(\*)?( \([0-9.]+, [0-9.]+–[0-9.]+\))?", text)
     assert m and bool(m[1]) == bool(m[3]), text
     return float(m[2]), bool(m[1]), bool(m[4])
 

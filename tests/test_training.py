@@ -134,7 +134,7 @@ def test_time_budget_ends_training_with_a_validated_partial_epoch(valve_tiny):
 
 def test_early_stopping_after_patience_epochs_without_progress(valve_tiny, monkeypatch):
     scripted = iter([1.0, 0.9, 0.95, 0.97, 0.5, 0.4])  # epoch 0, 1, 2, 3, ...
-    monkeypatch.setattr("nnfmu.training.session.score", lambda model, traj: next(scripted))
+    monkeypatch.setattr("nnfmu.training.session.score", lambda model, traj, **kw: next(scripted))
     result = train(valve_tiny, ModelConfig(arch="mlp", n_u=2, n_y=2, **TINY),
                    TrainConfig(**{**FAST, "epochs": 30, "patience": 2}))
     assert result.stop_reason == "early-stopping" and len(result.history) == 4

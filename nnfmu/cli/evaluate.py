@@ -8,6 +8,7 @@ writes all three per model, output and trajectory.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -30,6 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", help="write the scores to this JSON file")
     p.add_argument("--plots", help="write a PNG of predicted vs measured outputs into this folder")
     p.add_argument("--trajectory", type=int, help="trajectory to plot (default: the median-scored one)")
+    p.add_argument("--init-window", dest="init_window", type=int, metavar="N",
+                   help="the models may see the first N measured samples (FMUs with window parameters get them) "
+                        "and are scored on the rest, as the identification benchmarks do (default: the "
+                        "dataset's init_window from meta.json, else 1: the free run from y0, every sample scored)")
+    p.add_argument("--horizon", type=int, metavar="H",
+                   help="H-step-ahead prediction: restart every model from the measured output every H samples "
+                        "(default: one free run per trajectory, the headline protocol)")
     p.set_defaults(func=_run)
 
 
@@ -56,14 +64,23 @@ def format_table(evaluations, outputs) -> str:
                      + _table(rmse[0], rmse[1:]))
 
 
+def _protocol(args: argparse.Namespace, ds):
+    """The evaluation protocol (nnfmu.protocols) from --init-window, --horizon and the dataset's init_window."""
+    from nnfmu.protocols import Protocol
+
+    window = args.init_window if args.init_window is not None else getattr(ds, "init_window", None)
+    return Protocol(init_window=max(int(window or 1), 1), horizon=args.horizon)
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cosim import evaluate
     from nnfmu.data import load_dataset
 
     ds = load_dataset(args.data)
-    evaluations = evaluate(args.fmus, ds, split=args.split, progress=True)
-    print(f"{args.split} split of {args.data}: {ds.split(args.split).n_traj} trajectories, free run from the measured "
-          "y0; fit % = 100 (1 - NRMSE)")
+    protocol = _protocol(args, ds)
+    evaluations = evaluate(args.fmus, ds, split=args.split, progress=True, protocol=protocol)
+    print(f"{args.split} split of {args.data}: {ds.split(args.split).n_traj} trajectories, {protocol.describe()}; "
+          "fit % = 100 (1 - NRMSE)")
     print(format_table(evaluations, ds.outputs))
     for ev in evaluations:  # the FMU warns on these samples: its outputs there are extrapolated
         if ev.out_of_range is not None:
@@ -71,7 +88,7 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     json_path = args.json or (out / "scores.json" if out else None)
     if json_path:
-        doc = {"data": str(args.data), "split": args.split, "Ts": ds.Ts,
+        doc = {"data": str(args.data), "split": args.split, "Ts": ds.Ts, "protocol": protocol.to_json(),
                "outputs": [c.to_json() for c in ds.outputs],
                "scoring": "per trajectory and output: RMSE in the output's unit, NRMSE = RMSE / std(measured), "
                           "fit_percent = 100 (1 - NRMSE); totals: mean over outputs (not RMSE), then over trajectories",
@@ -82,7 +99,11 @@ def _run(args: argparse.Namespace) -> int:
     if plots:
         from nnfmu.plots import plot_trajectory
 
-        png = plot_trajectory(ds, evaluations, Path(plots) / f"{args.split}_trajectory.png",
+        measured = ds.split(args.split).y
+        shown = [dataclasses.replace(ev, predictions=[protocol.padded(p, len(y)) for p, y in zip(ev.predictions,
+                                                                                                    measured)])
+                 for ev in evaluations]
+        png = plot_trajectory(ds, shown, Path(plots) / f"{args.split}_trajectory.png",
                               split=args.split, index=args.trajectory)
         print(f"plot written to {png}")
     return 0

@@ -1,4 +1,4 @@
-"""``nnfmu generate valve|arm --out DIR [--size SIZE] [--seed N] [--force]``: simulate a dataset folder."""
+"""``nnfmu generate valve|arm|slider --out DIR [--size SIZE] [--seed N] [--force]``: simulate a dataset folder."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-SYSTEMS = ("arm", "valve")  # sizes: nnfmu.physics.DATASET_SIZES (imported late: it pulls in CasADi)
+SYSTEMS = ("arm", "slider", "valve")  # sizes: nnfmu.physics.DATASET_SIZES (imported late: it pulls in CasADi)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--out", required=True, help="dataset folder to write")
     p.add_argument("--size", default=None,
                    help="valve: paper (default; 900 x 500 train, 30 x 3500 test) or small; "
-                        "arm: benchmark (default; ~40 000 train samples, one 3600-sample test record) or small")
+                        "arm: benchmark (default; ~40 000 train samples, one 3600-sample test record) or small; "
+                        "slider: standard (default; 40 x 1000 train, 4 x 4000 valid and test) or small")
     p.add_argument("--seed", type=int, default=0, help="non-negative random seed (default 0)")
     p.add_argument("--force", action="store_true", help="replace an existing dataset folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

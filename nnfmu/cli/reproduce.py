@@ -1,4 +1,4 @@
-"""``nnfmu reproduce valve|arm|robot --out DIR [--budget smoke|quick|paper] [--data PATH] [--tune] [--seed N]``.
+"""``nnfmu reproduce valve|arm|robot|slider --out DIR [--budget smoke|quick|paper] [--data PATH] [--tune] [--seed N]``.
 
 Runs the paper's study as resumable cells (see :mod:`nnfmu.study.pipeline`):
 data, 5 architectures x 2 strategies, every model exported to an FMU, the
@@ -15,7 +15,8 @@ from nnfmu.cli._resources import add_resource_options
 
 _DESCRIPTION = (
     "Reproduce the paper's study (parallel vs series-parallel training of MLP, RNN, LSTM, GRU and TCN) on the "
-    "valve or arm (generated data) or the industrial robot (measured data, --data). Every model, the linear "
+    "valve, the arm or the slider (generated data) or the industrial robot (measured data, --data). Every "
+    "model, the linear "
     "baseline and the physics model are exported as FMUs and scored by co-simulation in fmpy. Budgets: smoke "
     "(minutes, numbers mean nothing), quick (well under an hour), paper (the paper's protocol, with a Ray Tune "
     "grid search; hours). Re-running with the same options skips what is done; Ctrl-C keeps the training "
@@ -26,7 +27,7 @@ _DESCRIPTION = (
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="run the paper's study: 5 networks x 2 strategies + baselines, as FMUs",
                        description=_DESCRIPTION)
-    p.add_argument("system", choices=["valve", "arm", "robot"], help="which system")
+    p.add_argument("system", choices=["valve", "arm", "robot", "slider"], help="which system")
     p.add_argument("-o", "--out", required=True, help="study folder (created; re-use it to resume)")
     p.add_argument("--budget", choices=["smoke", "quick", "paper"], default="quick",
                    help="data size, training length and hyperparameters (default quick)")

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 from nnfmu.cli._resources import add_resource_options, check_resource_options
+from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -33,6 +34,9 @@ _MODEL_OPTIONS = (
     ("--layers", "layers", int, "hidden layers (MLP), stacked recurrent layers, or TCN layers (default per arch)"),
     ("--window", "window", int, "past samples seen by the MLP (default 4); the TCN's must equal its receptive field"),
     ("--dropout", "dropout", float, "dropout probability on hidden activations (default 0)"),
+    ("--init-window", "init_window", int,
+     "N: the initial state is estimated from the N measured samples up to t0 (RNN/LSTM/GRU: a learned encoder; "
+     "MLP/TCN: their own window); 1 = from y0 and u0 alone (default 1)"),
 )
 _TRAIN_OPTIONS = (
     ("--lr", "lr", float, "AdamW learning rate (default 3e-3)"),
@@ -49,7 +53,21 @@ _TRAIN_OPTIONS = (
     ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none). Alone (without --epochs "
      "and --patience) it means: train until the budget is spent and keep the best epoch; the progress bar shows "
      "the time left"),
+    ("--feedback-noise", "feedback_noise", float,
+     "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
+    ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
+    ("--lr-schedule", "lr_schedule", str, "learning-rate schedule: constant or cosine over --epochs (default: constant)"),
+    ("--valid-horizon", "valid_horizon", str,
+     "validation free runs: split (each trajectory), joined (end to end), auto (joined for contiguous pieces "
+     "when the test is longer; default: auto)"),
 )
+# Switches (store_true), model or training fields.
+_FLAG_OPTIONS = (
+    ("--join", "join", "join the training trajectories end to end before cutting --truncate windows (data cut "
+                       "from one continuous recording)"),
+)
+_CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
+            "valid_horizon": ("auto", "split", "joined")}
 
 
 # --max-minutes alone: no epoch limit that a budget could reach, and no early stopping
@@ -83,7 +101,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
     p.add_argument("-o", "--out", required=True, help="checkpoint file to write (.pt)")
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
-        p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
+        p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
+    for flag, dest, text in _FLAG_OPTIONS:
+        p.add_argument(flag, dest=dest, action="store_const", const=True, default=None, help=text)
+    p.add_argument("--increment", nargs="?", const="on", choices=["on", "auto"], default=None,
+                   help="increment mode for integrating plants: predict y[k+1]-y[k] scaled by the data's "
+                        "increments, inputs relative to the newest output. 'auto' trains the network both ways "
+                        "(into <out stem>.residual.pt and .increment.pt) and keeps the one with the lower "
+                        "validation NRMSE")
+    seeds = p.add_argument_group("seeds (several trainings of the same network)")
+    seeds.add_argument("--seeds", type=int, metavar="K",
+                       help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
+    seeds.add_argument("--keep", choices=["ensemble", "best"], default="ensemble",
+                       help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU), "
+                            "or the best on validation (default ensemble)")
+    seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     hybrid = p.add_argument_group("hybrid models (--arch hybrid)")
     for flag, dest, typ, text in _HYBRID_OPTIONS:
         hybrid.add_argument(flag, dest=dest, type=typ, default=None, choices=_HYBRID_CHOICES.get(dest),
@@ -104,6 +136,8 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
     from nnfmu.training import TrainConfig
 
     changes = _given(args, _TRAIN_OPTIONS)
+    if args.join is not None:
+        changes["join"] = True
     if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
         changes.update(epochs=BUDGET_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
@@ -132,6 +166,8 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     from nnfmu.models import ModelConfig
 
     given = _given(args, _MODEL_OPTIONS)
+    if args.increment == "on":
+        given["increment"] = True
     arch = args.arch or (stored or {}).get("arch")
     hybrid_given = _given(args, _HYBRID_OPTIONS)
     if hybrid_given and arch != "hybrid":
@@ -172,15 +208,12 @@ def _differs(config, key: str, value) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import signal
     from pathlib import Path
 
-    from nnfmu.cli._outputs import remove_if_untrained
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
     from nnfmu.models import load_checkpoint
-    from nnfmu.training import train
 
     out = Path(args.out)
     device = check_resource_options(args)
@@ -193,6 +226,20 @@ def _run(args: argparse.Namespace) -> int:
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    if args.increment == "auto":
+        return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
+    if args.seeds is not None:
+        return run_seeds(args, ds, model_config, train_config, out, device)
+    return _run_one(args, ds, model_config, train_config, out, device)
+
+
+def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
+    """One training into ``out`` (or its resumption), with the summary printed."""
+    import signal
+
+    from nnfmu.cli._outputs import remove_if_untrained
+    from nnfmu.training import train
+
     try:
         result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
                        device=device, threads=args.threads)
@@ -216,6 +263,5 @@ def _run(args: argparse.Namespace) -> int:
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
-    per_output = ", ".join(f"{c.name} {v:.4f}" for c, v in zip(ds.outputs, result.test.output_mean))
-    print(f"test free-run NRMSE: {result.test.mean:.4f} ({per_output})")
+    print_test(ds, result.test, result.test_window, model_config.init_window)
     return 0

@@ -125,8 +125,10 @@ def _recut(path: Path, arr: dict, piece: int) -> Dataset:
               "test": _pieces(arr["u_test"], arr["y_test"], piece).concatenated()}
     if "u_val" in arr:
         splits["valid"] = _pieces(arr["u_val"], arr["y_val"], piece)
+    # contiguous: each split's pieces follow each other in time (one recording, a sample dropped per cut),
+    # so training windows and validation runs may span several pieces (nnfmu.training.horizons).
     source = {"kind": "robot-benchmark", "layout": "recut-605", "file": str(path.resolve()),
-              "caveat": RECUT_CAVEAT, "piece_length": piece,
+              "caveat": RECUT_CAVEAT, "piece_length": piece, "contiguous": True,
               "reference": "Weigand et al. 2022, doi:10.26204/DATA/5"}
     return Dataset(Ts=ROBOT_TS, inputs=ROBOT_INPUTS, outputs=ROBOT_OUTPUTS, splits=splits, source=source)
 

@@ -142,7 +142,7 @@ def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options:
         shutil.copyfile(fmi_header_dir() / name, sources / name)
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    desc = model_description.describe(model.spec, token, stamp, structure=structure)
+    desc = model_description.describe(model.spec, token, stamp, fmi_version, structure=structure)
     header = c_header.render_c_header(desc, code.n_x, entry_points,
                                       extra_lines=_model_exchange.c_header_lines(desc) if with_me else ())
     (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")

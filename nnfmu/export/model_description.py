@@ -14,7 +14,14 @@ The layout is::
     then                     outputs               output, discrete (they change at sample times only)
     then                     <y>_start             parameter, fixed: the initial outputs y0
     then                     parameters            parameter, tunable: the ``p`` port
+    then                     <c>_past              parameter, fixed: the init window (``spec.init_window > 1``)
     then (Model Exchange)    x.<state>, der(...)   local, continuous: the ODE's states, then their derivatives
+
+A model whose ``init`` sees an init window of ``N`` samples (:mod:`nnfmu.window_names`) takes
+the ``N - 1`` samples before t0 of every output and input: FMI 3 one array ``<c>_past`` of
+``N - 1`` values per channel, FMI 2 one scalar ``<c>_past[j]`` per sample (``j = 1`` the
+oldest). Their start value is NaN, meaning "not set": the FMU then uses ``y0`` (the
+``<y>_start`` value) or the first input ``u0`` there, the plant at rest.
 
 The outputs at t0 are the ``<y>_start`` values, so they are initial unknowns
 that depend on those parameters only; outputs never depend directly on inputs
@@ -35,6 +42,7 @@ from dataclasses import dataclass
 from nnfmu import __version__
 from nnfmu.errors import FmuBuildError
 from nnfmu.system import SystemSpec, Variable
+from nnfmu.window_names import past_element, past_name
 
 GENERATION_TOOL = f"nnfmu {__version__}"
 LOG_CATEGORIES = (("logStatusError", "errors: bad calls, calls not allowed in the current state, non-finite values"),
@@ -65,6 +73,7 @@ class ScalarVariable:
     type: str = "Real"  # Real, Integer or Boolean
     min: float | None = None
     max: float | None = None
+    size: int = 1  # values of the variable: > 1 for an FMI 3 array (one Dimension)
     nominal: float | None = None
     derivative: int | None = None  # a state derivative: the value reference of its state
 
@@ -147,7 +156,25 @@ def check_spec(spec: SystemSpec) -> None:
                                 f"[{v.min}, {v.max}]; give it a start value inside")
 
 
-def describe(spec: SystemSpec, token: str, generation_time: str, *,
+def _window_rows(spec: SystemSpec, fmi_version: int) -> list[dict]:
+    """The init window's parameters: per channel an FMI 3 array, or FMI 2 scalars, of the N - 1 samples before t0."""
+    n_past = spec.init_window - 1
+    rows = []
+    for c, v in enumerate(spec.outputs + spec.inputs):
+        what = "output" if c < spec.n_y else "input"
+        rest = f"{v.name}_start" if what == "output" else f"the first input {v.name}"
+        text = (f"init window: {v.name} at the {n_past} samples before the start time, oldest first; NaN (the "
+                f"default): not set, {rest} is used there (the plant at rest)")
+        common = dict(causality="parameter", variability="fixed", initial="exact", start=math.nan, unit=v.unit,
+                      role="past", description=text)
+        if fmi_version == 3:
+            rows.append(dict(name=past_name(v.name), size=n_past, index=c, **common))
+        else:
+            rows += [dict(name=past_element(v.name, j + 1), index=c * n_past + j, **common) for j in range(n_past)]
+    return rows
+
+
+def describe(spec: SystemSpec, token: str, generation_time: str, fmi_version: int = 2, *,
              structure: ContinuousStructure | None = None) -> FmuDescription:
     """Assign value references (see the module docstring) and return the one description of the FMU.
 
@@ -180,6 +207,7 @@ def describe(spec: SystemSpec, token: str, generation_time: str, *,
     rows += [dict(name=v.name, causality="parameter", variability="tunable", initial="exact", start=v.start,
                   unit=v.unit, description=v.description, role="parameter", index=i)
              for i, v in enumerate(spec.parameters)]
+    rows += _window_rows(spec, fmi_version) if spec.init_window > 1 else []
     if structure is not None:
         rows += _state_rows(structure, first_vr=len(rows))
     defaults = dict(initial=None, start=None, unit="", description="", index=0)
@@ -211,7 +239,10 @@ def _start_text(v: ScalarVariable) -> str | None:
         return None
     if v.type == "Boolean":
         return "true" if v.start else "false"
-    return str(int(v.start)) if v.type == "Integer" else num(v.start)
+    if v.type == "Integer":
+        return str(int(v.start))
+    one = "NaN" if math.isnan(v.start) else num(v.start)  # xs:double spells it NaN
+    return " ".join([one] * v.size)
 
 
 def _bound_text(v: ScalarVariable, bound: float | None) -> str | None:
@@ -312,10 +343,12 @@ def render_fmi3(desc: FmuDescription) -> str:
     variables = ET.SubElement(root, "ModelVariables")
     for v in desc.variables:
         derivative = None if v.derivative is None else str(v.derivative)
-        ET.SubElement(variables, _FMI3_TYPES[v.type], _attrs(
+        element = ET.SubElement(variables, _FMI3_TYPES[v.type], _attrs(
             name=v.name, valueReference=str(v.value_reference), description=v.description,
             causality=v.causality, variability=v.variability, initial=v.initial, **_value_attrs(v),
             derivative=derivative))
+        if v.size > 1 or v.role == "past":
+            ET.SubElement(element, "Dimension", start=str(v.size))
     structure = ET.SubElement(root, "ModelStructure")
     for kind, tag in (("output", "Output"), ("derivative", "ContinuousStateDerivative"),
                       ("initial", "InitialUnknown")):

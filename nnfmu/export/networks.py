@@ -27,9 +27,10 @@ import torch
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
-from nnfmu.models import MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
+from nnfmu.export.ensemble import ensemble_to_casadi
+from nnfmu.export.init_window import init_function, relative_taps
+from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.models import tcn_state
-from nnfmu.models.config import HYBRID_ARCH
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables
 
@@ -50,7 +51,7 @@ def _recurrent_step(model: RecurrentStepModel, x, un):
     n_blocks = c.layers * (2 if model.is_lstm else 1)
     hidden = [x[c.n_y + i * c.hidden:c.n_y + (i + 1) * c.hidden] for i in range(n_blocks)]
     hs, cs = (hidden[:c.layers], hidden[c.layers:]) if model.is_lstm else (hidden, [None] * c.layers)
-    inp, new_h, new_c = ca.vertcat(yn, un), [], []
+    inp, new_h, new_c = ca.vertcat(ca.DM.zeros(c.n_y, 1) if c.increment else yn, un), [], []
     for i, layer in enumerate(model.rnn_layers):
         nets.check_recurrent_layer(layer, f"rnn_layers.{i}")
         h, cell = nets.recurrent_layer_expr(layer, inp, hs[i], cs[i])
@@ -69,23 +70,12 @@ def _tcn_step(model: TCNStepModel, x, un):
     for i, (n, width) in enumerate(tcn_state.line_shapes(c)):
         cols = [x[offset + j * width:offset + (j + 1) * width] for j in range(n)] + [h]
         offset += n * width
-        out = nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], cols[::2 ** i]),
-                                   "activation")
+        taps = relative_taps(cols, c.n_y) if i == 0 and c.increment else cols[::2 ** i]
+        out = nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], taps), "activation")
         new_lines += cols[1:]
         h = out if i == 0 else h + out
     yn_next = _skip(model, yn, nets.linear_expr(model.head, h))
     return ca.vertcat(yn_next, *new_lines), yn_next
-
-
-def _tcn_init(model: TCNStepModel, yn0, un0):
-    """The rest state: each line holds the column its layer's input has when every past sample is [y0, u0]."""
-    h, lines = ca.vertcat(yn0, un0), []
-    for i, (n, _) in enumerate(tcn_state.line_shapes(model.config)):
-        lines.append(ca.repmat(h, n, 1))
-        taps = [h] * model.config.kernel_size
-        out = nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], taps), "activation")
-        h = out if i == 0 else h + out
-    return ca.vertcat(yn0, *lines)
 
 
 def _window_step(model: MLPStepModel, x, un):
@@ -93,23 +83,17 @@ def _window_step(model: MLPStepModel, x, un):
     L = c.window
     ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
     us = [x[L * c.n_y + j * c.n_u:L * c.n_y + (j + 1) * c.n_u] for j in range(L - 1)] + [un]
-    samples = [ca.vertcat(y, u) for y, u in zip(ys, us)]
+    seen = [y - ys[-1] for y in ys] if c.increment else ys  # increment mode: relative to the newest output
+    samples = [ca.vertcat(y, u) for y, u in zip(seen, us)]
     n = nets.module_expr(model.net, ca.vertcat(*samples), "net")
     yn_next = _skip(model, ys[-1], n)
     return ca.vertcat(*ys[1:], yn_next, *us[1:]), yn_next
 
 
 def _skip(model: StepModel, yn, n):
-    return yn + model.config.skip_scale * n if model.config.skip else n
-
-
-def _init_expr(model: StepModel, yn0, un0):
-    c = model.config
-    if isinstance(model, RecurrentStepModel):
-        return ca.vertcat(yn0, ca.DM.zeros(model.n_x - c.n_y, 1))
-    if isinstance(model, TCNStepModel):
-        return _tcn_init(model, yn0, un0)
-    return ca.vertcat(ca.repmat(yn0, c.window, 1), ca.repmat(un0, c.window - 1, 1))
+    if not model.config.skip:
+        return n
+    return yn + (nets.dm(model.increment_scale) * n if model.config.increment else model.config.skip_scale * n)
 
 
 def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca.Function]:
@@ -133,19 +117,22 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
         from nnfmu.hybrid.export import hybrid_to_casadi
 
         return hybrid_to_casadi(model, verify=verify)
+    if isinstance(model, EnsembleStepModel):
+        init, step = ensemble_to_casadi(model, lambda member: to_casadi(member, verify=False))
+        if verify:
+            verify_export(model, init, step)
+        return init, step
     if not isinstance(model, _MODEL_CLASSES):
         raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
                           f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
     _check_modules(model)
     c = model.config
-    y0, u0 = ca.MX.sym("y0", c.n_y), ca.MX.sym("u0", c.n_u)
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
     u_mean, u_std, y_mean, y_std = (nets.dm(b) for b in (model.u_mean, model.u_std, model.y_mean, model.y_std))
-    x0 = _init_expr(model, (y0 - y_mean) / y_std, (u0 - u_mean) / u_std)
+    init = init_function(model, u_mean, u_std, y_mean, y_std)
     builder = (_recurrent_step if isinstance(model, RecurrentStepModel)
                else _tcn_step if isinstance(model, TCNStepModel) else _window_step)
     x_next, yn_next = builder(model, x, (u - u_mean) / u_std)
-    init = ca.Function("init", [y0, u0], [x0], ["y0", "u0"], ["x0"])
     step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     if verify:
         verify_export(model, init, step)
@@ -160,10 +147,15 @@ def verify_export(model: StepModel, init: ca.Function, step: ca.Function, seed: 
     y0 = ref.y_mean.numpy() + ref.y_std.numpy() * rng.standard_normal(c.n_y)
     u0 = ref.u_mean.numpy() + ref.u_std.numpy() * rng.standard_normal(c.n_u)
     x = rng.standard_normal(model.n_x)
+    past = [ref.y_mean.numpy() + ref.y_std.numpy() * rng.standard_normal((c.init_window - 1, c.n_y)),
+            ref.u_mean.numpy() + ref.u_std.numpy() * rng.standard_normal((c.init_window - 1, c.n_u))]
+    past_t = {"y_past": torch.from_numpy(past[0])[None], "u_past": torch.from_numpy(past[1])[None]} \
+        if c.init_window > 1 else {}
     with torch.no_grad():
-        x0_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(u0)[None])[0].numpy()
+        x0_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(u0)[None], **past_t)[0].numpy()
         xn_t, yn_t = (a[0].numpy() for a in ref.step(torch.from_numpy(x)[None], torch.from_numpy(u0)[None]))
-    pairs = {"x0": (np.asarray(init(y0, u0)).ravel(), x0_t)}
+    past_c = [p.ravel() for p in past] if c.init_window > 1 else []
+    pairs = {"x0": (np.asarray(init(y0, u0, *past_c)).ravel(), x0_t)}
     xn_c, yn_c = step(x, u0)
     pairs["x_next"], pairs["y_next"] = (np.asarray(xn_c).ravel(), xn_t), (np.asarray(yn_c).ravel(), yn_t)
     for what, (got, want) in pairs.items():
@@ -196,13 +188,14 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         outputs=tuple(Variable(**ch) for ch in channels),
         description=f"{model.config.arch.upper()} network exported by nnfmu",
         source=_provenance(model),
+        init_window=model.config.init_window,
     )
     return CasadiModel(init, step, spec)
 
 
 def _is_hybrid(model) -> bool:
     """A :class:`nnfmu.hybrid.HybridStepModel` (physics + correction): exported by :mod:`nnfmu.hybrid.export`."""
-    return isinstance(model, StepModel) and model.config.arch == HYBRID_ARCH
+    return isinstance(model, StepModel) and model.config.arch == "hybrid"
 
 
 def _identifier(name: str) -> str:

@@ -15,14 +15,20 @@
 from nnfmu.hybrid._sx_source import SUPPORTED_OPS
 from nnfmu.hybrid.casadi_torch import GRADIENT_MODES, TorchFunction, sx_to_torch
 from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_torch, compiled_to_torch
-from nnfmu.hybrid.config import CORRECTIONS, PHYSICS, HybridConfig, load_physics_params, physics_system
+from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, PHYSICS, HybridConfig, load_physics_params, physics_system
 from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
 from nnfmu.hybrid.model import HybridStepModel
+from nnfmu.models.architectures import register_architecture
+
+# models/ stays below hybrid/: the hybrid architecture registers itself (and is found through the
+# "nnfmu.architectures" entry point when a stored config names it before anything imported this package).
+register_architecture(HYBRID_ARCH, config_class=HybridConfig, model_class=HybridStepModel)
 
 __all__ = [
     "BACKENDS",
     "CORRECTIONS",
     "GRADIENT_MODES",
+    "HYBRID_ARCH",
     "PHYSICS",
     "SUPPORTED_OPS",
     "CompiledFunction",

@@ -30,6 +30,7 @@ from nnfmu.models.config import ACTIVATIONS, ModelConfig
 from nnfmu.physics import PhysicsSystem, arm_system, valve_system
 
 CORRECTIONS = ("derivative", "step")
+HYBRID_ARCH = "hybrid"
 
 
 @dataclass(frozen=True)
@@ -205,6 +206,9 @@ class HybridConfig(ModelConfig):
             raise ShapeError(f"a hybrid model's memory is its physics state, so window must be 1, got "
                              f"{self.window!r}; leave window out")
         object.__setattr__(self, "window", 1)
+        if self.increment or self.init_window != 1 or self.members != 1:
+            raise ConfigError("a hybrid model starts from its physics state (init_state(y0, u0)) and predicts the "
+                              "physics' output; increment, init_window and members do not apply to it: leave them out")
         if not 0.0 <= float(self.dropout) < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout!r}")
         object.__setattr__(self, "dropout", float(self.dropout))

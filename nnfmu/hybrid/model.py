@@ -127,6 +127,8 @@ class HybridStepModel(StepModel):
         ``theta`` of the trained physical parameters (``config.train_physics``).
     """
 
+    takes_feedback_noise = False  # its state is the physics state: no fed-back output to disturb
+
     def __init__(self, config: HybridConfig, meta: Mapping | None = None):
         if not isinstance(config, HybridConfig):
             raise ShapeError(f"expected a HybridConfig, got {type(config).__name__}")

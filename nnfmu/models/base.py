@@ -31,6 +31,7 @@ from torch import nn
 
 from nnfmu.errors import DataError, ShapeError
 from nnfmu.models.config import ModelConfig
+from nnfmu.models.encoder import check_past, window
 
 
 def default_meta(config: ModelConfig) -> dict:
@@ -76,6 +77,9 @@ class StepModel(nn.Module):
         Where the weights come from (checkpoint path, training figures); empty for a fresh model.
     """
 
+    #: Whether its free runs feed back an output that training may disturb (``TrainConfig.feedback_noise``).
+    takes_feedback_noise = True
+
     def __init__(self, config: ModelConfig, meta: Mapping | None = None):
         super().__init__()
         if not isinstance(config, ModelConfig):
@@ -88,6 +92,9 @@ class StepModel(nn.Module):
         self.register_buffer("u_std", torch.ones(config.n_u))
         self.register_buffer("y_mean", torch.zeros(config.n_y))
         self.register_buffer("y_std", torch.ones(config.n_y))
+        if getattr(config, "increment", False):  # per-output increment scale, normalised units (set from data)
+            self.register_buffer("increment_scale", torch.full((config.n_y,), float(config.skip_scale)))
+        self.feedback_noise = 0.0  # std of the noise on the fed-back output in training free runs (normalised)
 
     # ---- what subclasses provide -------------------------------------------------------------
     @property
@@ -105,9 +112,32 @@ class StepModel(nn.Module):
         """State ``x`` with its newest output ``y_k`` replaced by ``yn`` (teacher forcing)."""
         raise NotImplementedError
 
+    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        """Initial state from the init window (B, N, n_y), (B, N, n_u), newest sample last.
+
+        Architectures with ``init_window > 1`` override it (:mod:`nnfmu.models.encoder`).
+        """
+        return self._init_norm(yn_win[:, -1], un_win[:, -1])
+
     def _skip(self, yn: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
-        """Apply the optional skip connection: ``y_{k+1} = y_k + skip_scale * N`` or ``N``."""
-        return yn + self.config.skip_scale * n if self.config.skip else n
+        """Apply the optional skip connection: ``y_{k+1} = y_k + scale * N`` or ``N``.
+
+        ``scale`` is ``skip_scale``, or in increment mode the per-output ``increment_scale``.
+        """
+        if not self.config.skip:
+            return n
+        return yn + (self.increment_scale if self.config.increment else self.config.skip_scale) * n
+
+    def _y_input(self, yn: torch.Tensor) -> torch.Tensor:
+        """What a one-sample network sees of its newest output: ``yn``, or in increment mode ``yn`` relative to
+        itself (zeros): the response must not depend on where the output is."""
+        return torch.zeros_like(yn) if self.config.increment else yn
+
+    def _feedback(self, yn: torch.Tensor) -> torch.Tensor:
+        """The output fed back in a free run: ``yn``, plus white noise of std :attr:`feedback_noise` in training."""
+        if self.feedback_noise and self.training:
+            return yn + self.feedback_noise * torch.randn_like(yn)
+        return yn
 
     def _check_sizes(self) -> None:
         """Dry-run init and step at batch 2 so that inconsistent sizes fail at construction."""
@@ -124,6 +154,16 @@ class StepModel(nn.Module):
             if tuple(got) != want:
                 raise ShapeError(f"{type(self).__name__}: {what} has shape {tuple(got)}, expected {want}; "
                                  "the sub-networks do not fit the config")
+
+    def set_increment_scale(self, dy_std) -> None:
+        """Set the increment-mode scale from the std of the one-step output increments, ``(n_y,)`` physical units."""
+        if not self.config.increment:
+            raise ShapeError("set_increment_scale needs a model built with increment=True")
+        value = torch.as_tensor(np.asarray(dy_std, dtype=np.float64)).reshape(-1).to(self.y_std.dtype) / self.y_std
+        if value.shape != (self.config.n_y,) or not (torch.isfinite(value).all() and (value > 0).all()):
+            raise DataError(f"increment std must be {self.config.n_y} positive finite values, got {value.tolist()}; "
+                            "the training outputs must change from sample to sample")
+        self.increment_scale.copy_(value)
 
     # ---- normalisation -----------------------------------------------------------------------
     def set_normalisation(self, stats) -> None:
@@ -151,11 +191,28 @@ class StepModel(nn.Module):
         return yn * self.y_std + self.y_mean
 
     # ---- the public step interface (physical units) ------------------------------------------
-    def init(self, y0: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
-        """Initial state ``x0`` (B, n_x) from the initial output ``y0`` (B, n_y) and input ``u0`` (B, n_u)."""
+    def init(self, y0: torch.Tensor, u0: torch.Tensor, y_past: torch.Tensor | None = None,
+             u_past: torch.Tensor | None = None) -> torch.Tensor:
+        """Initial state ``x0`` (B, n_x) from the initial output ``y0`` (B, n_y) and input ``u0`` (B, n_u).
+
+        With ``config.init_window = N > 1``, also from the ``N - 1`` samples before them, ``y_past``
+        (B, N-1, n_y) and ``u_past`` (B, N-1, n_u), oldest first; without them the plant is taken at
+        rest, ``(y0, u0)`` repeated (:mod:`nnfmu.models.encoder`).
+        """
         self._check_batch(y0, self.config.n_y, "y0")
         self._check_batch(u0, self.config.n_u, "u0", len(y0))
-        return self._init_norm(self.normalise_y(y0), self.normalise_u(u0))
+        return self._init_window_norm(*self._window(self.normalise_y(y0), self.normalise_u(u0),
+                                                    self._past(y_past, u_past, len(y0))))
+
+    def _past(self, y_past, u_past, batch: int) -> tuple | None:
+        """``(yn_past, un_past)`` normalised, or None; checked against the config."""
+        if y_past is None and u_past is None:
+            return None
+        check_past(y_past, u_past, self.config, batch)
+        return self.normalise_y(y_past), self.normalise_u(u_past)
+
+    def _window(self, yn0: torch.Tensor, un0: torch.Tensor, past: tuple | None) -> tuple[torch.Tensor, torch.Tensor]:
+        return window(yn0, un0, past, self.config.init_window)
 
     def step(self, x: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """One sample period: state ``x`` (B, n_x) and input ``u`` (B, n_u) -> ``(x_next, y_next)``.
@@ -175,21 +232,25 @@ class StepModel(nn.Module):
             raise ShapeError(f"{name} has shape {shape}, expected a tensor of shape {want}")
 
     # ---- sequences ---------------------------------------------------------------------------
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-        """Free run in normalised units: (B, T, n_u), (B, n_y) -> (B, T, n_y), first row ``yn0``."""
-        x = self._init_norm(yn0, un[:, 0])
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
+        """Free run in normalised units: (B, T, n_u), (B, n_y) -> (B, T, n_y), first row ``yn0``.
+
+        ``x0``: the initial state (default ``_init_norm(yn0, un[:, 0])``).
+        """
+        x = self._init_norm(yn0, un[:, 0]) if x0 is None else x0
         ys = [yn0]
         for k in range(un.shape[1] - 1):
-            x, yn = self._step_norm(x, un[:, k])
+            x, yn = self._step_norm(self._inject_y(x, self._feedback(ys[-1])) if self.feedback_noise else x, un[:, k])
             ys.append(yn)
         return torch.stack(ys, dim=1)
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+                             x0: torch.Tensor | None = None) -> torch.Tensor:
         """One-step-ahead predictions of ``yn_meas[:, 1:]`` from ``yn_meas[:, k]``, ``un[:, k]``: (B, T-1, n_y).
 
         The generic loop over :meth:`_step_norm`; subclasses override it with fused calls.
         """
-        x = self._init_norm(yn_meas[:, 0], un[:, 0])
+        x = self._init_norm(yn_meas[:, 0], un[:, 0]) if x0 is None else x0
         preds = []
         for k in range(un.shape[1] - 1):
             x = self._inject_y(x, yn_meas[:, k])
@@ -197,14 +258,21 @@ class StepModel(nn.Module):
             preds.append(yn)
         return torch.stack(preds, dim=1)
 
-    def rollout_normalised(self, un: torch.Tensor, yn0: torch.Tensor,
-                           yn_meas: torch.Tensor | None = None) -> torch.Tensor:
-        """:meth:`forward` in normalised units (what the trainer's loss sees): (B, T, n_y)."""
-        if yn_meas is None:
-            return self._free_run_norm(un, yn0)
-        return torch.cat([yn0[:, None], self._teacher_forced_norm(un, yn_meas)], dim=1)
+    def rollout_normalised(self, un: torch.Tensor, yn0: torch.Tensor, yn_meas: torch.Tensor | None = None,
+                           past: tuple | None = None) -> torch.Tensor:
+        """:meth:`forward` in normalised units (what the trainer's loss sees): (B, T, n_y).
 
-    def forward(self, u: torch.Tensor, y0: torch.Tensor, y_meas: torch.Tensor | None = None) -> torch.Tensor:
+        ``past``: ``(yn_past, un_past)``, the normalised samples before t0 (init window).
+        """
+        x0 = ()
+        if past is not None or self.config.init_window > 1:
+            x0 = (self._init_window_norm(*self._window(yn0, un[:, 0], past)),)
+        if yn_meas is None:
+            return self._free_run_norm(un, yn0, *x0)
+        return torch.cat([yn0[:, None], self._teacher_forced_norm(un, yn_meas, *x0)], dim=1)
+
+    def forward(self, u: torch.Tensor, y0: torch.Tensor, y_meas: torch.Tensor | None = None, *,
+                y_past: torch.Tensor | None = None, u_past: torch.Tensor | None = None) -> torch.Tensor:
         """Sequence call in physical units.
 
         Parameters
@@ -216,6 +284,8 @@ class StepModel(nn.Module):
         y_meas : tensor (B, T, n_y), optional
             Measured outputs. If given, ``y_meas[:, k]`` is fed as ``y_k`` (teacher forcing);
             otherwise the model's own predictions are fed back (free run).
+        y_past, u_past : tensor (B, N-1, n_y), (B, N-1, n_u), optional
+            The samples before t0 for a model with ``init_window = N > 1`` (see :meth:`init`).
 
         Returns
         -------
@@ -230,10 +300,11 @@ class StepModel(nn.Module):
             raise ShapeError(f"y_meas has shape {tuple(getattr(y_meas, 'shape', ()))}, "
                              f"expected {(*u.shape[:2], c.n_y)} to match u")
         ynm = None if y_meas is None else self.normalise_y(y_meas)
-        yn = self.rollout_normalised(self.normalise_u(u), self.normalise_y(y0), ynm)
+        past = self._past(y_past, u_past, u.shape[0])
+        yn = self.rollout_normalised(self.normalise_u(u), self.normalise_y(y0), ynm, past)
         return torch.cat([y0[:, None], self.denormalise_y(yn[:, 1:])], dim=1)
 
-    def simulate(self, u, y0) -> np.ndarray:
+    def simulate(self, u, y0, *, y_past=None, u_past=None) -> np.ndarray:
         """Free run in float64 on numpy arrays in physical units.
 
         Parameters
@@ -242,6 +313,8 @@ class StepModel(nn.Module):
             Inputs; ``u[N-1]`` is not used.
         y0 : array (n_y,)
             Initial output, returned as the first row.
+        y_past, u_past : array (init_window - 1, n_y), (init_window - 1, n_u), optional
+            The measured samples before ``y0`` and ``u[0]``, oldest first (default: at rest).
 
         Returns
         -------
@@ -256,9 +329,13 @@ class StepModel(nn.Module):
             raise ShapeError(f"y0 has shape {y0.shape}, expected ({c.n_y},)")
         if not (np.isfinite(u).all() and np.isfinite(y0).all()):
             raise DataError("u or y0 has non-finite values; remove or interpolate them before simulating")
+        past = {}
+        if y_past is not None or u_past is not None:
+            past = {k: None if v is None else torch.from_numpy(np.array(v, dtype=np.float64))[None]
+                    for k, v in (("y_past", y_past), ("u_past", u_past))}
         model = copy.deepcopy(self).double().eval()
         with torch.no_grad(), torch_threads(1):
-            y = model(torch.from_numpy(u)[None], torch.from_numpy(y0)[None])[0]
+            y = model(torch.from_numpy(u)[None], torch.from_numpy(y0)[None], **past)[0]
         return y.numpy()
 
 

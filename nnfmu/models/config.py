@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from nnfmu.errors import ConfigError, ShapeError, check_options
+from nnfmu.models import architectures
 
 ARCHS = ("mlp", "rnn", "lstm", "gru", "tcn")
 RECURRENT_ARCHS = ("rnn", "lstm", "gru")
@@ -19,8 +20,6 @@ WINDOW_ARCHS = ("mlp", "tcn")
 ACTIVATIONS = ("tanh", "relu", "sigmoid", "elu", "silu")
 # nn.RNN only knows these two nonlinearities.
 RNN_ACTIVATIONS = ("tanh", "relu")
-# Physics + neural correction: nnfmu.hybrid.HybridConfig / HybridStepModel.
-HYBRID_ARCH = "hybrid"
 
 # Per-architecture defaults for the options left as None.
 _DEFAULT_LAYERS = {"mlp": 2, "rnn": 1, "lstm": 1, "gru": 1, "tcn": 3}
@@ -60,6 +59,23 @@ class ModelConfig:
         Predict the increment: ``y_{k+1} = y_k + skip_scale * N(...)`` (in normalised units).
     skip_scale : float
         Scale of the increment; a small value starts training near "hold the last output".
+    increment : bool
+        Increment mode, for integrating plants (a position driven by a force): ``y_{k+1} = y_k +
+        s * N`` with ``s`` per output the standard deviation of the one-step increments of the
+        training data (a buffer, ``increment_scale``, in normalised units; it replaces
+        ``skip_scale``), and the network sees its past outputs relative to the newest one, so
+        that shifting the output shifts the whole response. Needs ``skip``.
+    init_window : int
+        ``N``, the samples of ``[y, u]`` that :meth:`StepModel.init` sees: the initial ``(y0, u0)``
+        and the ``N - 1`` samples before it. 1 (the default): ``init(y0, u0)`` alone, the plant at
+        rest before t0. RNN/LSTM/GRU map the window to their hidden state with a learned encoder
+        (:mod:`nnfmu.models.encoder`); the MLP and TCN fill their own window with it.
+    encoder_hidden : int
+        Width of the two hidden layers of the learned encoder (``init_window > 1``, recurrent only).
+    members : int
+        1: one network. K > 1: an ensemble of K networks of this config (trained with different
+        seeds, :func:`nnfmu.training.train_seeds`) whose mean output is fed back to all of them as
+        the one prediction (:mod:`nnfmu.models.ensemble`).
     activation : str
         Nonlinearity of the MLP and TCN layers and of the RNN (RNN: 'tanh' or 'relu').
         The LSTM and GRU have their fixed gate nonlinearities.
@@ -76,11 +92,15 @@ class ModelConfig:
     skip: bool = True
     skip_scale: float = 0.1
     activation: str = "tanh"
+    increment: bool = False
+    init_window: int = 1
+    encoder_hidden: int = 64
+    members: int = 1
 
     def __post_init__(self) -> None:
         if self.arch not in ARCHS:
             raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
-        for name in ("n_u", "n_y", "hidden", "kernel_size"):
+        for name in ("n_u", "n_y", "hidden", "kernel_size", "init_window", "encoder_hidden", "members"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ShapeError(f"ModelConfig.{name} must be a positive integer, got {value!r}")
@@ -96,6 +116,9 @@ class ModelConfig:
         object.__setattr__(self, "dropout", float(self.dropout))
         object.__setattr__(self, "skip_scale", float(self.skip_scale))
         object.__setattr__(self, "skip", bool(self.skip))
+        object.__setattr__(self, "increment", bool(self.increment))
+        if self.increment and not self.skip:
+            raise ConfigError("increment=True predicts y_{k+1} - y_k, which needs skip=True; drop skip=False")
         valid_act = RNN_ACTIVATIONS if self.arch == "rnn" else ACTIVATIONS
         if self.activation not in valid_act:
             raise ConfigError(f"activation {self.activation!r} is not available for arch {self.arch!r}; "
@@ -132,13 +155,13 @@ class ModelConfig:
     def from_dict(cls, d: Mapping) -> "ModelConfig":
         """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`.
 
-        ``arch="hybrid"`` gives a :class:`nnfmu.hybrid.HybridConfig` (imported on demand:
-        the hybrid package builds on this one).
+        An architecture registered by another package (:mod:`nnfmu.models.architectures`, e.g.
+        ``arch="hybrid"``: :class:`nnfmu.hybrid.HybridConfig`) is rebuilt by its own config class.
         """
-        if cls is ModelConfig and isinstance(d, Mapping) and d.get("arch") == HYBRID_ARCH:
-            from nnfmu.hybrid.config import HybridConfig
-
-            return HybridConfig.from_dict(d)
+        if cls is ModelConfig and isinstance(d, Mapping) and d.get("arch") not in ARCHS:
+            other = architectures.config_class(d.get("arch"))
+            if other is not None and other is not cls:
+                return other.from_dict(d)
         check_options(d, {f.name for f in dataclasses.fields(cls)}, cls.__name__)
         return cls(**dict(d))
 
@@ -150,3 +173,7 @@ class ModelConfig:
         if {"arch", "layers", "kernel_size"} & set(changes):
             changes.setdefault("window", None if self.arch != "mlp" or "arch" in changes else self.window)
         return dataclasses.replace(self, **changes)
+
+
+for _arch in ARCHS:
+    architectures.register_architecture(_arch, config_class=ModelConfig)

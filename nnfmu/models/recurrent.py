@@ -14,7 +14,10 @@ Flat state layout, all in normalised units (what the FMU carries)::
 
     x = [ y_k (n_y) | h^(1) (hidden) | ... | h^(L) (hidden) | c^(1) | ... | c^(L) ]   (c: LSTM only)
 
-``init(y0, u0)`` sets ``y_k = y0`` and all hidden and cell states to zero.
+``init(y0, u0)`` sets ``y_k = y0`` and all hidden and cell states to zero; with an init window
+(``init_window > 1``) a learned encoder maps the window to them (:mod:`nnfmu.models.encoder`).
+In increment mode the cells see ``y_k`` relative to itself, i.e. not at all: the hidden state carries
+the dynamics and the output integrates the readout.
 Dropout (training only) acts on each layer's output, between layers and before the readout.
 The sequence calls use the fused ``nn.GRU`` etc. for teacher forcing and the
 same cell functions as :meth:`step` for the free run.
@@ -30,6 +33,7 @@ from torch.nn import functional as F
 
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import RECURRENT_ARCHS, ModelConfig
+from nnfmu.models.encoder import encoder_input, make_encoder
 
 
 class RecurrentStepModel(StepModel):
@@ -44,6 +48,8 @@ class RecurrentStepModel(StepModel):
         )
         self.dropout = nn.Dropout(config.dropout)
         self.readout = nn.Linear(config.hidden, config.n_y)
+        if config.init_window > 1:
+            self.encoder = make_encoder(config, self.n_x - config.n_y)
         self._check_sizes()
 
     @property
@@ -83,7 +89,7 @@ class RecurrentStepModel(StepModel):
         """One step on unpacked states; shared by :meth:`_step_norm` and the free run."""
         cell, layers, readout = weights
         drop = self.training and self.config.dropout > 0
-        inp = torch.cat([yn, un], dim=1)
+        inp = torch.cat([self._y_input(yn), un], dim=1)
         new_h, new_c = [], []
         for i, w in enumerate(layers):
             if self.is_lstm:
@@ -99,6 +105,12 @@ class RecurrentStepModel(StepModel):
         zeros = yn0.new_zeros(yn0.shape[0], self.n_x - self.config.n_y)
         return torch.cat([yn0, zeros], dim=1)
 
+    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        if self.config.init_window == 1:
+            return self._init_norm(yn_win[:, -1], un_win[:, -1])
+        hidden = self.encoder(encoder_input(yn_win, un_win, self.config.increment))
+        return torch.cat([yn_win[:, -1], hidden], dim=1)
+
     def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         yn, hs, cs = self._split(x)
         yn_next, hs, cs = self._cell_step(yn, un, hs, cs, self._weights())
@@ -107,21 +119,24 @@ class RecurrentStepModel(StepModel):
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
         """Free run without packing the state each step (same operations as :meth:`_step_norm`)."""
-        _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]))
+        _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]) if x0 is None else x0)
         yn, ys, weights = yn0, [yn0], self._weights()
         for un_k in un[:, :-1].unbind(1):
-            yn, hs, cs = self._cell_step(yn, un_k, hs, cs, weights)
+            yn, hs, cs = self._cell_step(self._feedback(yn), un_k, hs, cs, weights)
             ys.append(yn)
         return torch.stack(ys, dim=1)
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+                             x0: torch.Tensor | None = None) -> torch.Tensor:
         """Fused: each layer runs over the whole sequence in one ``nn.GRU``/... call."""
         feed = yn_meas[:, :-1]
-        inp = torch.cat([feed, un[:, :-1]], dim=2)
-        for layer in self.rnn_layers:
-            inp, _ = layer(inp)  # zero initial hidden state, as init() sets it
+        inp = torch.cat([self._y_input(feed), un[:, :-1]], dim=2)
+        _, hs, cs = self._split(x0) if x0 is not None else (None, [None] * self.config.layers, [])
+        for i, layer in enumerate(self.rnn_layers):
+            h0 = None if hs[i] is None else (hs[i][None], cs[i][None]) if self.is_lstm else hs[i][None]
+            inp, _ = layer(inp, h0)  # None: the zero initial hidden state that init() sets
             inp = self.dropout(inp)
         return self._skip(feed, self.readout(inp))
 

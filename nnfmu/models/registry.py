@@ -1,27 +1,29 @@
-"""``build_model``: a fresh network of the architecture a :class:`ModelConfig` names."""
+"""``build_model``: a fresh network of the architecture a :class:`ModelConfig` names.
+
+The five networks are registered here; packages built on :mod:`nnfmu.models` register
+their own architectures (:mod:`nnfmu.models.architectures`), e.g. ``nnfmu.hybrid``.
+"""
 
 from __future__ import annotations
 
 from typing import Mapping
 
 from nnfmu.errors import ShapeError
+from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import HYBRID_ARCH, ModelConfig
+from nnfmu.models.config import ModelConfig
+from nnfmu.models.ensemble import EnsembleStepModel
 from nnfmu.models.mlp import MLPStepModel
 from nnfmu.models.recurrent import RecurrentStepModel
 from nnfmu.models.tcn import TCNStepModel
 
-MODEL_CLASSES: dict[str, type[StepModel]] = {
-    "mlp": MLPStepModel,
-    "rnn": RecurrentStepModel,
-    "lstm": RecurrentStepModel,
-    "gru": RecurrentStepModel,
-    "tcn": TCNStepModel,
-}
+for _arch, _cls in (("mlp", MLPStepModel), ("rnn", RecurrentStepModel), ("lstm", RecurrentStepModel),
+                    ("gru", RecurrentStepModel), ("tcn", TCNStepModel)):
+    architectures.register_architecture(_arch, model_class=_cls)
 
 
 def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm=None) -> StepModel:
-    """Build a freshly initialised network (or hybrid model, for a :class:`nnfmu.hybrid.HybridConfig`).
+    """Build a freshly initialised network (or a registered architecture's model, e.g. a hybrid).
 
     Parameters
     ----------
@@ -36,12 +38,8 @@ def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm
         config = ModelConfig.from_dict(config)
     if not isinstance(config, ModelConfig):
         raise ShapeError(f"expected a ModelConfig or a dict, got {type(config).__name__}")
-    if config.arch == HYBRID_ARCH:  # physics + correction; the hybrid package builds on this one
-        from nnfmu.hybrid.model import HybridStepModel
-
-        model = HybridStepModel(config, meta)
-    else:
-        model = MODEL_CLASSES[config.arch](config, meta)
+    cls = EnsembleStepModel if config.members > 1 else architectures.model_class(config.arch)
+    model = cls(config, meta)
     if norm is not None:
         model.set_normalisation(norm)
     return model

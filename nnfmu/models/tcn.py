@@ -40,6 +40,8 @@ from nnfmu.models.window import WindowStepModel
 class TCNStepModel(WindowStepModel):
     """Temporal convolutional network with residual dilated causal convolutions."""
 
+    relative_window = False  # increment mode acts in the first layer, per column (:meth:`_conv`)
+
     def __init__(self, config: ModelConfig, meta: Mapping | None = None):
         super().__init__(config, meta)
         if config.arch != "tcn":
@@ -53,11 +55,18 @@ class TCNStepModel(WindowStepModel):
         self.head = nn.Linear(config.hidden, config.n_y)
         self._check_sizes()
 
-    def _conv(self, conv: nn.Conv1d, h: torch.Tensor) -> torch.Tensor:
-        """Valid dilated convolution of ``h`` (B, T_in, C) channels last -> (B, T_in - (k-1)d, H)."""
+    def _conv(self, i: int, h: torch.Tensor) -> torch.Tensor:
+        """Valid dilated convolution of layer ``i`` over ``h`` (B, T_in, C) channels last -> (B, T_in - (k-1)d, H).
+
+        In increment mode the first layer's taps are relative to their newest (:func:`tcn_state.relative_taps`)."""
+        conv = self.convs[i]
         k, d = conv.kernel_size[0], conv.dilation[0]
         n_out = h.shape[1] - (k - 1) * d
-        taps = torch.stack([h[:, j * d:j * d + n_out] for j in range(k)], dim=3)  # (B, n_out, C, k)
+        shifted = [h[:, j * d:j * d + n_out] for j in range(k)]
+        if i == 0 and self.config.increment:  # (B, n_out, k, C) made relative, then as below
+            taps = tcn_state.relative_taps(torch.stack(shifted, dim=2), self.config.n_y).transpose(2, 3)
+        else:
+            taps = torch.stack(shifted, dim=3)  # (B, n_out, C, k)
         # (B, n_out, C*k) channel-major matches the (H, C, k) weight viewed as (H, C*k): no weight copy
         return F.linear(taps.reshape(*taps.shape[:2], -1), conv.weight.view(conv.out_channels, -1), conv.bias)
 
@@ -65,8 +74,8 @@ class TCNStepModel(WindowStepModel):
         """``seq`` (B, T + L - 1, C) -> features (B, T, H) of the T newest positions."""
         h = seq
         drop = self.training and self.dropout.p > 0  # skip the no-op module call in the hot loop
-        for i, conv in enumerate(self.convs):
-            out = self.activation(self._conv(conv, h))
+        for i in range(len(self.convs)):
+            out = self.activation(self._conv(i, h))
             out = self.dropout(out) if drop else out
             h = out if i == 0 else h[:, h.shape[1] - out.shape[1]:] + out
         return h
@@ -88,8 +97,14 @@ class TCNStepModel(WindowStepModel):
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-        return StepModel._free_run_norm(self, un, yn0)  # the loop over the incremental step
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
+        return StepModel._free_run_norm(self, un, yn0, x0)  # the loop over the incremental step
+
+    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+                             x0: torch.Tensor | None = None) -> torch.Tensor:
+        if x0 is not None:  # an init window's delay lines, not samples to pad the sequence with
+            return StepModel._teacher_forced_norm(self, un, yn_meas, x0)
+        return super()._teacher_forced_norm(un, yn_meas)
 
     def state_from_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> torch.Tensor:
         self._check_window(yn_window, un_window)

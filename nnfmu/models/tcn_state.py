@@ -44,9 +44,19 @@ def split(config: ModelConfig, x: torch.Tensor) -> tuple[torch.Tensor, list[torc
     return yn, [f.reshape(len(x), n, c) for f, (n, c) in zip(flat, line_shapes(config))]
 
 
+def relative_taps(taps: torch.Tensor, n_y: int) -> torch.Tensor:
+    """First-layer taps (..., k, C), oldest first, in increment mode: outputs relative to the newest tap's.
+
+    Each first-layer column sees its own taps' outputs relative to its newest one, so every feature, and
+    the step, is the same wherever the output is (translation invariance), and each column is computed
+    once from the delay line."""
+    return torch.cat([taps[..., :n_y] - taps[..., -1:, :n_y], taps[..., n_y:]], dim=-1)
+
+
 def column(model, i: int, taps: torch.Tensor) -> torch.Tensor:
     """Layer ``i``'s activation at one position from its ``k`` input columns ``taps`` (B, k, C), oldest first."""
     conv = model.convs[i]
+    taps = relative_taps(taps, model.config.n_y) if i == 0 and model.config.increment else taps
     flat = taps.transpose(1, 2).reshape(len(taps), -1)  # channel-major, as the (H, C, k) weight viewed (H, C*k)
     out = model.activation(F.linear(flat, conv.weight.view(conv.out_channels, -1), conv.bias))
     return model.dropout(out) if model.training and model.dropout.p > 0 else out
@@ -72,7 +82,7 @@ def from_window(model, samples: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
     for i, (n, _) in enumerate(line_shapes(model.config)):
         lines.append(h[:, h.shape[1] - n:].reshape(len(h), -1))
         if i + 1 < model.config.layers:
-            out = model.activation(model._conv(model.convs[i], h))
+            out = model.activation(model._conv(i, h))
             out = model.dropout(out) if model.training and model.dropout.p > 0 else out
             h = out if i == 0 else h[:, h.shape[1] - out.shape[1]:] + out
     return torch.cat([yn, *lines], dim=1)

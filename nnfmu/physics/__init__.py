@@ -4,6 +4,7 @@
   RK4-discretised ``(init, step)`` pair (:class:`nnfmu.system.CasadiModel`).
 - :func:`valve_system` / :class:`ValveParams`: the two-stage pneumatic valve.
 - :func:`arm_system` / :class:`ArmParams`: the KUKA KR300 arm (RNEA in :mod:`nnfmu.physics.arm_dynamics`).
+- :func:`slider_system` / :class:`SliderParams`: a mass on a rail with friction (an integrating plant).
 - :func:`rk4_step`, :func:`rk4_function`: the fixed-step RK4 used everywhere.
 - :func:`generate_dataset`: simulated datasets (``nnfmu generate``).
 """
@@ -14,6 +15,7 @@ from nnfmu.physics.base import PhysicsSystem, parameter_variables, params_to_jso
 from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
 from nnfmu.physics.rk4 import rk4_function, rk4_step
+from nnfmu.physics.slider import SliderParams, slider_system
 from nnfmu.physics.valve import ValveParams, valve_system
 
 __all__ = [
@@ -22,6 +24,7 @@ __all__ = [
     "ArmParams",
     "DATASET_SIZES",
     "PhysicsSystem",
+    "SliderParams",
     "ValveParams",
     "arm_system",
     "bias_torque",
@@ -36,6 +39,7 @@ __all__ = [
     "rk4_function",
     "rk4_step",
     "rnea",
+    "slider_system",
     "unpack_parameters",
     "valve_system",
 ]

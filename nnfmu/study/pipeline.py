@@ -250,7 +250,7 @@ def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", d
 
     Parameters
     ----------
-    system : {'valve', 'arm', 'robot'}
+    system : {'valve', 'arm', 'robot', 'slider'}
     out : path
         The study folder; cells already done there are skipped, an unfinished training is resumed.
     budget : str or Budget

@@ -51,15 +51,36 @@ def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evalua
     label = f"{STRATEGY_PREFIX[strategy]}-{arch.upper()}"
     entry, evaluation = _score(ds, study, name, label)
     failed = steps.error_file(ckpt_path)
-    training = {"epochs_run": summary.get("epochs_run"), "best_epoch": ckpt.get("best_epoch"),
+    seeds = summary.get("seeds") or []
+    per_seed = (lambda key: ", ".join(str(r.get(key)) for r in seeds)) if seeds else None
+    training = {"epochs_run": per_seed("epochs_run") if seeds else summary.get("epochs_run"),
+                "best_epoch": per_seed("best_epoch") if seeds else ckpt.get("best_epoch"),
                 "best_valid_nrmse": _clean(summary.get("best_valid_nrmse")),
                 "torch_test_nrmse": _clean(summary.get("test_nrmse")), "stop_reason": summary.get("stop_reason"),
-                "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
-                "error": failed.read_text().strip() if failed.exists() else None}
+                "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))
+                                 + sum(r.get("seconds") or 0.0 for r in seeds)),
+                "error": failed.read_text().strip() if failed.exists() else None,
+                "valid_samples": summary.get("valid_samples"), "notes": summary.get("notes") or [],
+                "seeds": seed_summary(seeds, summary.get("keep"))}
     paths = {k: _rel(study, study.path(k, name)) for k in ("models", "fmus", "scores")}
     return ({"name": name, "label": label, "arch": arch, "strategy": strategy, **entry, "training": training,
              "model_config": ckpt.get("model_config"), "train_config": ckpt.get("train_config"), "paths": paths},
             evaluation)
+
+
+def seed_summary(rows: list[dict], keep: str | None) -> dict | None:
+    """Spread of the seeds' own scores (mean, min, max) and their stop reasons; None for one seed."""
+    if not rows:
+        return None
+
+    def spread(key: str) -> dict:
+        vals = [r[key] for r in rows if r.get(key) is not None and math.isfinite(r[key])]
+        return {"mean": float(np.mean(vals)), "min": float(min(vals)), "max": float(max(vals))} if vals else None
+
+    return {"n": len(rows), "keep": keep, "test": spread("test_nrmse"), "valid": spread("best_valid_nrmse"),
+            "stop_reasons": [r.get("stop_reason") for r in rows],
+            "per_seed": [{k: r.get(k) for k in ("seed", "best_valid_nrmse", "test_nrmse", "best_epoch", "epochs_run",
+                                                "stop_reason", "error")} for r in rows]}
 
 
 def _baselines(ds: Dataset, study) -> list[tuple[dict, Evaluation | None]]:
@@ -69,6 +90,7 @@ def _baselines(ds: Dataset, study) -> list[tuple[dict, Evaluation | None]]:
     order = info.get("order") or info.get("n_x")
     physics = {"valve": "Physics model (the valve model that generated the data, RK4)",
                "arm": "Physics model (the arm model that generated the data, RK4)",
+               "slider": "Physics model (the slider model that generated the data, RK4)",
                "robot": "Arm physics model (nominal parameters, open loop; not fitted to this robot)"}[study.system]
     rows = []
     for name, label, extra in (("linear", "Linear state-space baseline" + (f" (n_x = {order})" if order else ""),
@@ -101,7 +123,7 @@ def _figures(study, ds: Dataset, best: dict, evaluations: dict) -> list[str]:
     chosen = [evaluations[best[s]] for s in STRATEGIES if best[s] and evaluations.get(best[s])]
     with_baselines = chosen[:1] + [evaluations[n] for n in ("linear", "physics") if evaluations.get(n)]
     # Fig. 2 (valve): one representative test trajectory; Fig. 3 (robot, arm): the whole test record.
-    index = None if study.system == "valve" else 0
+    index = None if study.system in ("valve", "slider") else 0
     out = []
     for stem, evs in (("best_parallel_vs_series_parallel", chosen), ("best_network_vs_baselines", with_baselines)):
         if evs:

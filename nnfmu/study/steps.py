@@ -70,7 +70,7 @@ def check_source(system: str, source: Path | None, data_dir: Path) -> None:
 
 def prepare_data(system: str, budget: Budget, seed: int, source: Path | None, out: Path,
                  progress: bool) -> str:
-    """Generate (valve, arm) or load (``source``) the data, trim it to the budget and save it at ``out``."""
+    """Generate (valve, arm, slider) or load (``source``) the data, trim it to the budget and save it at ``out``."""
     if source is not None:
         ds = load_source(source)
         check_study_data(system, ds, str(source))
@@ -127,6 +127,8 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
     model_config = hyper.model_config(arch, ds.n_u, ds.n_y)
     train_config = hyper.train_config(strategy=strategy, epochs=budget.epochs, patience=budget.patience,
                                       seed=seed, max_minutes=budget.max_minutes)
+    if budget.seeds > 1:
+        return _train_seeds(ds, model_config, train_config, budget, ckpt, inputs, progress, device, threads)
     resume = _resumable(ckpt, inputs, model_config, train_config)
     error_file(ckpt).unlink(missing_ok=True)
     if not resume:
@@ -143,6 +145,29 @@ def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget
     how = "resumed, " if resume else ""
     return (f"{how}best valid NRMSE {result.best_valid_nrmse:.4f} at epoch {result.best_epoch} of "
             f"{len(result.history) - 1}, stop: {result.stop_reason}")
+
+
+def _train_seeds(ds: Dataset, model_config, train_config, budget: Budget, ckpt: Path, inputs: tuple[Path, ...],
+                 progress: bool, device: str, threads: int | None) -> str:
+    """``budget.seeds`` seeds of one network (:func:`nnfmu.training.train_seeds`); the kept model goes to ``ckpt``."""
+    import shutil
+
+    from nnfmu.training import train_seeds
+    from nnfmu.training.ensemble import seed_paths
+
+    members = seed_paths(ckpt, [0])[0].parent
+    if members.exists() and any(p.exists() and p.stat().st_mtime > members.stat().st_mtime for p in inputs):
+        shutil.rmtree(members)  # the data changed: the seeds start over
+    ckpt.unlink(missing_ok=True)
+    try:
+        result = train_seeds(ds, model_config, train_config, seeds=budget.seeds, keep=budget.keep, out=ckpt,
+                             jobs=1, progress=progress, device=device, threads=threads)
+    except TrainingError as exc:
+        write_text_atomic(error_file(ckpt), f"{exc}\n")
+        return f"FAILED: {exc}"
+    spread = result.spread()
+    return (f"{budget.keep} of {budget.seeds} seeds: valid NRMSE {result.valid_nrmse:.4f}, test "
+            f"{result.test_nrmse:.4f}; seeds' test {spread['mean']:.4f} ({spread['min']:.4f}-{spread['max']:.4f})")
 
 
 # ---- FMUs ----------------------------------------------------------------------------------------
@@ -174,9 +199,9 @@ def export_linear(model_file: Path, fmu: Path, name: str) -> str:
 
 def physics_model(system: str):
     """The physics reference model of ``system`` (the robot is scored against the arm model)."""
-    from nnfmu.physics import arm_system, valve_system
+    from nnfmu.physics import arm_system, slider_system, valve_system
 
-    return valve_system().model() if system == "valve" else arm_system().model()
+    return {"valve": valve_system, "slider": slider_system}.get(system, arm_system)().model()
 
 
 def export_physics(system: str, fmu: Path) -> str:

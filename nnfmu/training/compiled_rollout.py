@@ -12,7 +12,7 @@ operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`:
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
 It applies to a :class:`RecurrentStepModel` on the CPU in float32 or float64, with no
-active dropout (eval mode, or ``dropout=0``). The library is compiled at first use with
+active dropout or feedback noise (eval mode, or both zero), no init window and no increment mode. The library is compiled at first use with
 the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
 like the compiled physics (``$NNFMU_CACHE_DIR``). Without a compiler, or if compiling
 fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
@@ -47,8 +47,9 @@ ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
 def compiled_rollout(model: StepModel):
     """``rollout(un, yn0) -> ys`` by the compiled free run, or None where it does not apply.
 
-    Applies to a :class:`RecurrentStepModel` whose weights are CPU float32/float64 tensors
-    and whose dropout is inactive (eval mode or ``dropout=0``); None otherwise, and None with a
+    Applies to a :class:`RecurrentStepModel` whose weights are CPU float32/float64 tensors,
+    without an init window or increment mode, and whose dropout and feedback noise are inactive
+    (eval mode, or zero); None otherwise, and None with a
     one-time RuntimeWarning when the library cannot be compiled.
     """
     if not _applies(model):
@@ -59,19 +60,17 @@ def compiled_rollout(model: StepModel):
     return functools.partial(_apply, model, library)
 
 
-def training_rollout(model: StepModel, strategy: str):
-    """``rollout(un, yn) -> predictions (B, T, n_y)`` for one training batch, as the trainer's loss sees them.
+def training_rollout(model: StepModel):
+    """``free_run(un, yn, past=None) -> predictions (B, T, n_y)``: a parallel training batch's free run from ``yn[:, 0]``.
 
-    Parallel: the compiled free run where it applies (:func:`compiled_rollout`), else
-    ``model.rollout_normalised(un, yn[:, 0])``. Series-parallel: teacher forcing (torch's fused layers).
-    Call it after ``model.train()``: whether dropout is active decides the path.
+    The compiled free run where it applies (:func:`compiled_rollout`; never with an init window
+    ``past``), else ``model.rollout_normalised(un, yn[:, 0], None, past)``. Call it after
+    ``model.train()`` and after setting ``model.feedback_noise``: both decide the path.
     """
-    if strategy != "parallel":
-        return lambda un, yn: model.rollout_normalised(un, yn[:, 0], yn)
     fast = compiled_rollout(model)
     if fast is None:
-        return lambda un, yn: model.rollout_normalised(un, yn[:, 0])
-    return lambda un, yn: fast(un, yn[:, 0])
+        return lambda un, yn, past=None: model.rollout_normalised(un, yn[:, 0], None, past)
+    return lambda un, yn, past=None: fast(un, yn[:, 0])
 
 
 def free_run_forward(model: StepModel, u: torch.Tensor, y0: torch.Tensor) -> torch.Tensor:
@@ -86,10 +85,13 @@ def free_run_forward(model: StepModel, u: torch.Tensor, y0: torch.Tensor) -> tor
 def _applies(model: StepModel) -> bool:
     if os.environ.get(ENV_SWITCH, "1") == "0" or type(model) is not RecurrentStepModel:
         return False
+    c = model.config
+    if c.init_window > 1 or c.increment:  # the encoder's initial state and the increment readout are torch's only
+        return False
     dtype = model.readout.weight.dtype
     if dtype not in _REALS or any(p.device.type != "cpu" or p.dtype != dtype for p in model.parameters()):
         return False
-    return not (model.training and model.config.dropout > 0)
+    return not (model.training and (c.dropout > 0 or model.feedback_noise))
 
 
 def _cell(model: RecurrentStepModel) -> int:

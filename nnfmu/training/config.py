@@ -15,6 +15,9 @@ from nnfmu.errors import ConfigError, check_options
 
 STRATEGIES = ("parallel", "series-parallel")
 DTYPES = ("float32", "float64")
+AVERAGES = ("none", "ema", "swa")
+LR_SCHEDULES = ("constant", "cosine")
+VALID_HORIZONS = ("auto", "split", "joined")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,6 +52,33 @@ class TrainConfig:
         Share of the training split carved out for validation when the dataset has no 'valid' split.
     dtype : {'float32', 'float64'}
         Precision of training (evaluation of the test split is always float64).
+    feedback_noise : float
+        Std of white noise added to the output fed back in the training free runs (parallel) or
+        to the measured outputs fed in (series-parallel), in units of each output's training
+        std. The network learns to pull a disturbed output back instead of drifting with it.
+    average : {'none', 'ema', 'swa'}
+        Weight averaging: 'ema' keeps an exponential moving average of the weights (decay
+        ``average_decay`` per optimiser step); 'swa' the plain mean of the weights at the end of
+        every epoch from epoch ``average_start * epochs`` on. Validation, early stopping and
+        the checkpoint's best weights use the averaged weights.
+    average_decay : float
+        EMA decay per optimiser step, in (0, 1).
+    average_start : float
+        SWA: the fraction of ``epochs`` after which the epoch-end weights are averaged.
+    lr_schedule : {'constant', 'cosine'}
+        'cosine': the learning rate falls from ``lr`` to ``lr * lr_final`` over ``epochs``
+        (per optimiser step, half a cosine period), so the preset's epochs fix the whole run.
+    lr_final : float
+        Final learning rate of the cosine schedule, as a fraction of ``lr``.
+    join : bool
+        Join the training trajectories end to end, in order, into one record before cutting
+        ``truncate``-sample windows: for data cut from one continuous recording (the robot
+        benchmark's pieces), so that training windows may be as long as the free runs to survive.
+    valid_horizon : {'auto', 'split', 'joined'}
+        What the validation free run covers: 'split' every validation trajectory on its own;
+        'joined' the validation trajectories end to end as one record (as the robot's test
+        record is scored); 'auto' joins them when the dataset says its pieces are consecutive
+        (``source["contiguous"]``) and the test trajectories are longer than the validation ones.
     """
 
     strategy: str = "parallel"
@@ -63,12 +93,28 @@ class TrainConfig:
     max_minutes: float | None = None
     valid_fraction: float = 0.1
     dtype: str = "float32"
+    feedback_noise: float = 0.0
+    average: str = "none"
+    average_decay: float = 0.999
+    average_start: float = 0.5
+    lr_schedule: str = "constant"
+    lr_final: float = 0.01
+    join: bool = False
+    valid_horizon: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.strategy not in STRATEGIES:
-            raise ConfigError(f"unknown strategy {self.strategy!r}; choose one of {', '.join(STRATEGIES)}")
-        if self.dtype not in DTYPES:
-            raise ConfigError(f"unknown dtype {self.dtype!r}; choose one of {', '.join(DTYPES)}")
+        for name, valid in (("strategy", STRATEGIES), ("dtype", DTYPES), ("average", AVERAGES),
+                            ("lr_schedule", LR_SCHEDULES), ("valid_horizon", VALID_HORIZONS)):
+            if getattr(self, name) not in valid:
+                raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(valid)}")
+        for name in ("average_decay", "average_start", "lr_final"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0.0 < value < 1.0):
+                raise ConfigError(f"{name} must be a number in (0, 1), got {value!r}")
+        if not (isinstance(self.feedback_noise, (int, float)) and 0.0 <= self.feedback_noise < math.inf):
+            raise ConfigError(f"feedback_noise must be a finite number >= 0 (a fraction of the output std), "
+                              f"got {self.feedback_noise!r}")
+        object.__setattr__(self, "join", bool(self.join))
         for name, low in (("epochs", 1), ("batch_size", 1), ("patience", 0)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:

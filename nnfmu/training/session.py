@@ -16,13 +16,15 @@ from pathlib import Path
 
 import torch
 
-from nnfmu.errors import TrainingError
+from nnfmu.errors import ConfigError, TrainingError
 from nnfmu.models.base import StepModel
 from nnfmu.models.checkpoint import save_checkpoint, state_snapshot
+from nnfmu.training.averaging import WeightAverage
 from nnfmu.training.batches import epoch_batches, masked_mse
 from nnfmu.training.compiled_rollout import training_rollout
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
+from nnfmu.training.horizons import lr_factor, with_context
 from nnfmu.training.resources import adamw, cpu_state
 
 
@@ -80,6 +82,11 @@ class Session:
     def __init__(self, model: StepModel, cfg: TrainConfig, train_seqs: list, valid, out: Path | None):
         self.model, self.cfg, self.train_seqs, self.valid, self.out = model, cfg, train_seqs, valid, out
         self.optimizer = adamw(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        if cfg.feedback_noise and not model.takes_feedback_noise:
+            raise ConfigError(f"a {type(model).__name__} feeds back no output that feedback_noise could disturb; "
+                              "train it with feedback_noise=0")
+        self.average = WeightAverage(model, cfg)
+        self.context = model.config.init_window - 1  # samples before each training free run, for the init window
         self.epoch = 0
         self.history: list[dict] = []
         self.best_state = state_snapshot(model)
@@ -96,21 +103,38 @@ class Session:
         generator = torch.Generator().manual_seed(cfg.seed * 1_000_003 + self.epoch + 1)
         total, count, early = 0.0, 0, False
         model.train()
-        rollout = training_rollout(model, cfg.strategy)
-        for b, batch in enumerate(epoch_batches(self.train_seqs, batch_size=cfg.batch_size,
-                                                truncate=cfg.truncate, generator=generator)):
-            loss = masked_mse(rollout(batch.un, batch.yn), batch.yn, batch.mask)
-            self.optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)
-            if not (torch.isfinite(loss) and torch.isfinite(norm)):
-                self._diverged(float(loss.detach()), b)
-            self.optimizer.step()
-            total += float(loss.detach()) * len(batch.un)
-            count += len(batch.un)
-            if stop.reason or (deadline is not None and time.monotonic() > deadline):
-                early = True
-                break
+        truncate = None if cfg.truncate is None else cfg.truncate + self.context
+        batches = list(epoch_batches(self.train_seqs, batch_size=cfg.batch_size, truncate=truncate,
+                                     generator=generator))
+        model.feedback_noise = cfg.feedback_noise if cfg.strategy == "parallel" else 0.0
+        try:
+            free_run = training_rollout(model)  # after train() and feedback_noise: they decide the compiled path
+            for b, batch in enumerate(batches):
+                un, yn, mask, past = with_context(batch, self.context)
+                if cfg.strategy == "parallel":
+                    pred = free_run(un, yn, past)
+                else:
+                    feed = yn + cfg.feedback_noise * torch.randn_like(yn) if cfg.feedback_noise else yn
+                    pred = model.rollout_normalised(un, yn[:, 0], feed, past)
+                loss = masked_mse(pred, yn, mask)
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)
+                if not (torch.isfinite(loss) and torch.isfinite(norm)):
+                    self._diverged(float(loss.detach()), b)
+                for group in self.optimizer.param_groups:
+                    group["lr"] = cfg.lr * lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                self.optimizer.step()
+                self.average.after_step()
+                total += float(loss.detach()) * len(un)
+                count += len(un)
+                if stop.reason or (deadline is not None and time.monotonic() > deadline):
+                    early = True
+                    break
+        finally:
+            model.feedback_noise = 0.0
+        if not stop.reason:
+            self.average.after_epoch(self.epoch + 1)
         return total / max(count, 1), early
 
     def _diverged(self, loss: float, batch: int) -> None:
@@ -124,14 +148,17 @@ class Session:
 
     # ---- bookkeeping -------------------------------------------------------------------------
     def validate(self) -> float:
-        return score(self.model, self.valid)
+        """Free-run NRMSE on the validation runs (after the init window), with the averaged weights if any."""
+        with self.average.applied():
+            return score(self.model, self.valid, context=self.context + 1)
 
     def record(self, train_loss: float | None, valid_nrmse: float, seconds: float, partial: bool) -> dict:
         """Append the epoch's metrics, update the best weights and the early-stopping counter."""
         improved = valid_nrmse < self.best_score
         if improved:
             self.best_score, self.best_epoch = valid_nrmse, self.epoch
-            self.best_state = state_snapshot(self.model)
+            with self.average.applied():
+                self.best_state = state_snapshot(self.model)
             self.bad_epochs = 0
         elif self.epoch > 0:
             self.bad_epochs += 1
@@ -151,7 +178,8 @@ class Session:
     def resume_state(self) -> dict:
         return {"epoch": self.epoch, "state_dict": state_snapshot(self.model),
                 "optimizer": cpu_state(self.optimizer.state_dict()), "torch_rng": torch.get_rng_state(),
-                "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed}
+                "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed,
+                "average": cpu_state(self.average.state_dict())}
 
     def restore(self, ckpt: dict) -> None:
         """Continue from a checkpoint written by :meth:`save` (its ``resume`` section)."""
@@ -165,6 +193,8 @@ class Session:
         self.best_state = {k: v.clone() for k, v in ckpt["state_dict"].items()}
         self.best_epoch = int(ckpt["best_epoch"])
         self.history = list(ckpt["history"])
+        if "average" in r:
+            self.average.load_state_dict(r["average"])
 
     def save(self, summary: dict | None = None) -> None:
         if self.out is None:

@@ -38,6 +38,8 @@ from nnfmu.progress import advance, training_bar
 from nnfmu.training.batches import normalised_sequences
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
+from nnfmu.training.horizons import join_sequences, validation_trajectories
+from nnfmu.training.increments import prepare_increment
 from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
 from nnfmu.valid_range import training_range
@@ -66,6 +68,9 @@ class TrainResult:
     checkpoint : Path or None
     notes : list of str
         Things the user should know (e.g. a validation split was carved out of train).
+    test_window : NrmseResult or None
+        With an init window of N > 1 samples: the test score after the window (the model sees
+        samples 0 .. N-1 and is scored on the rest); ``test`` is the free run from y0 alone.
     """
 
     model: StepModel
@@ -77,6 +82,7 @@ class TrainResult:
     checkpoint: Path | None
     elapsed_s: float
     notes: list = field(default_factory=list)
+    test_window: NrmseResult | None = None
 
     @property
     def test_nrmse(self) -> float | None:
@@ -125,7 +131,9 @@ def _new_model(model_config, dataset: Dataset, cfg: TrainConfig) -> StepModel:
     if isinstance(model_config, StepModel):
         return model_config
     torch.manual_seed(cfg.seed)
-    return build_model(config, dataset_meta(dataset, config.arch), norm=dataset.norm_stats("train"))
+    model = build_model(config, dataset_meta(dataset, config.arch), norm=dataset.norm_stats("train"))
+    prepare_increment(model, dataset.train)
+    return model
 
 
 def _resumed_model(ckpt: dict, model_config, out: Path, dataset: Dataset) -> StepModel:
@@ -202,6 +210,8 @@ def train(
             train_config = TrainConfig.from_dict(ckpt["train_config"])
     cfg = _as_train_config(train_config)
     dataset, notes = _prepare(dataset, cfg)
+    valid, valid_notes = validation_trajectories(dataset, cfg)
+    notes += valid_notes
     dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
         model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
@@ -209,25 +219,36 @@ def train(
         _check_device(model, device)
         seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
         model = model.to(device)
-        session = Session(model, cfg, seqs, dataset.valid, out)
+        session = Session(model, cfg, join_sequences(seqs) if cfg.join else seqs, valid, out)
         if ckpt:
             session.restore(ckpt)
         stop_reason = _run(session, progress, callback)
-        test = None
+        test = test_window = None
         if stop_reason not in ("SIGINT", "SIGTERM"):  # an interrupted run stops at once; the file is up to date
             best = copy.deepcopy(model).eval()
             best.load_state_dict(session.best_state)
-            test = free_run_nrmse(best, dataset.test, float64=True) if "test" in dataset.splits else None
+            test, test_window = _test_scores(best, dataset)
             # still inside fork_rng: the resume state saved here holds the training RNG, not the caller's
-            session.save({"test_nrmse": None if test is None else test.mean, "stop_reason": stop_reason})
+            session.save({"test_nrmse": None if test is None else test.mean, "stop_reason": stop_reason,
+                          "test_nrmse_window": None if test_window is None else test_window.mean,
+                          "valid_samples": valid.n_samples, "notes": notes})
     model = model.cpu()
     model.load_state_dict(session.best_state)
     model.eval()
     return TrainResult(model, session.history, session.best_epoch, session.best_score, test, stop_reason,
-                       out, session.elapsed, notes)
+                       out, session.elapsed, notes, test_window)
 
 
 fit = train
+
+
+def _test_scores(model: StepModel, dataset: Dataset) -> tuple[NrmseResult | None, NrmseResult | None]:
+    """Float64 free-run test scores: from the measured y0, and (init window N > 1) after the first N samples."""
+    if "test" not in dataset.splits:
+        return None, None
+    n = model.config.init_window
+    window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 else None
+    return free_run_nrmse(model, dataset.test, float64=True), window
 
 
 def _check_device(model: StepModel, device: torch.device) -> None:

@@ -7,7 +7,7 @@
 #include <string.h>
 
 #include "nnfmu_instance.h"
-#include "nnfmu_libm.h"
+#include "nnfmu_libm.h" /* math.h: NAN */
 #ifdef NNFMU_MODEL_EXCHANGE
 #include "nnfmu_me.h"
 #endif
@@ -157,6 +157,7 @@ void nnfmu_free(nnfmu_instance *inst) {
 void nnfmu_set_logging(nnfmu_instance *inst, int logging_on) { inst->logging_on = logging_on; }
 
 void nnfmu_start_values(nnfmu_values *v) {
+  int i;
   memset(v, 0, sizeof *v);
   v->mode = MODE_INSTANTIATED;
   v->max_samples = NNFMU_MAX_SAMPLES_DEFAULT;
@@ -164,6 +165,7 @@ void nnfmu_start_values(nnfmu_values *v) {
   memcpy(v->y_start, nnfmu_y_start, sizeof v->y_start);
   memcpy(v->y, nnfmu_y_start, sizeof v->y);
   memcpy(v->p, nnfmu_p_start, sizeof v->p);
+  for (i = 0; i < NNFMU_NPAST; ++i) v->past[i] = NAN; /* the init window: not set */
 }
 
 nnfmu_status nnfmu_reset(nnfmu_instance *inst) {
@@ -217,13 +219,15 @@ typedef struct {
   var_kind kind;
   size_t offset; /* of the group's array in nnfmu_values */
   const char *const *names;
+  int size; /* values per value reference: 1, or the length of an FMI 3 array */
 } var_group;
 
 static const var_group groups[] = {
-  {NNFMU_VR_U, NNFMU_NU, KIND_INPUT, offsetof(nnfmu_values, u), nnfmu_u_names},
-  {NNFMU_VR_Y, NNFMU_NY, KIND_OUTPUT, offsetof(nnfmu_values, y), nnfmu_y_names},
-  {NNFMU_VR_Y_START, NNFMU_NY, KIND_FIXED, offsetof(nnfmu_values, y_start), nnfmu_y_start_names},
-  {NNFMU_VR_P, NNFMU_NP, KIND_TUNABLE, offsetof(nnfmu_values, p), nnfmu_p_names},
+  {NNFMU_VR_U, NNFMU_NU, KIND_INPUT, offsetof(nnfmu_values, u), nnfmu_u_names, 1},
+  {NNFMU_VR_Y, NNFMU_NY, KIND_OUTPUT, offsetof(nnfmu_values, y), nnfmu_y_names, 1},
+  {NNFMU_VR_Y_START, NNFMU_NY, KIND_FIXED, offsetof(nnfmu_values, y_start), nnfmu_y_start_names, 1},
+  {NNFMU_VR_P, NNFMU_NP, KIND_TUNABLE, offsetof(nnfmu_values, p), nnfmu_p_names, 1},
+  {NNFMU_VR_PAST, NNFMU_N_PAST_VR, KIND_FIXED, offsetof(nnfmu_values, past), nnfmu_past_names, NNFMU_PAST_PER_VR},
 };
 
 #define READABLE (MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR | MODE_EVENT | MODE_CONTINUOUS)
@@ -244,6 +248,12 @@ static double *group_values(nnfmu_values *v, const var_group *g) { return (doubl
 
 int nnfmu_is_output(unsigned long vr) { return vr >= NNFMU_VR_Y && vr < NNFMU_VR_Y + NNFMU_NY; }
 
+size_t nnfmu_real_size(unsigned long vr) {
+  int i;
+  const var_group *g = find_group(vr, &i);
+  return g ? (size_t)g->size : 1;
+}
+
 static nnfmu_status unknown_vr(nnfmu_instance *inst, const char *caller, unsigned long vr) {
   return nnfmu_error(inst, "%s: unknown value reference %lu; this FMU has value references 0 to %d", caller,
                      vr, NNFMU_N_VR - 1);
@@ -263,7 +273,7 @@ static nnfmu_status wrong_type(nnfmu_instance *inst, const char *caller, unsigne
 }
 
 nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double *value) {
-  int i;
+  int i, k;
   const var_group *g;
   if (nnfmu_require(inst, caller, READABLE) != NNFMU_OK) return NNFMU_ERROR;
 #ifdef NNFMU_MODEL_EXCHANGE
@@ -275,12 +285,12 @@ nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned l
     return vr == NNFMU_VR_MAX_SAMPLES || vr == NNFMU_VR_RANGE_ERROR ? wrong_type(inst, caller, vr)
                                                                      : unknown_vr(inst, caller, vr);
   else if (g->kind == KIND_OUTPUT && inst->v.samples == 0) *value = inst->v.y_start[i]; /* y(t0) = y0 */
-  else *value = group_values(&inst->v, g)[i];
+  else for (k = 0; k < g->size; ++k) value[k] = group_values(&inst->v, g)[i * g->size + k];
   return NNFMU_OK;
 }
 
-nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double value) {
-  int i;
+nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr, const double *value) {
+  int i, k;
   const var_group *g;
   if (nnfmu_require(inst, caller, TUNABLE) != NNFMU_OK) return NNFMU_ERROR;
   if (vr == NNFMU_VR_TIME)
@@ -301,7 +311,7 @@ nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned l
     return nnfmu_error(inst, "%s: %s is a fixed parameter; set it before exitInitializationMode, or call reset "
                        "first", caller, g->names[i]);
   if (g->kind == KIND_TUNABLE && inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
-  group_values(&inst->v, g)[i] = value;
+  for (k = 0; k < g->size; ++k) group_values(&inst->v, g)[i * g->size + k] = value[k];
   return NNFMU_OK;
 }
 

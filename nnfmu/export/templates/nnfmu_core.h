@@ -58,9 +58,12 @@ NNFMU_INTERNAL nnfmu_status nnfmu_exit_initialization(nnfmu_instance *inst, cons
 NNFMU_INTERNAL nnfmu_status nnfmu_terminate(nnfmu_instance *inst, const char *caller);
 NNFMU_INTERNAL nnfmu_status nnfmu_reset(nnfmu_instance *inst);
 
-/* Variables, one value reference at a time (the wrappers loop; their VR types differ). */
+/* Variables, one value reference at a time (the wrappers loop; their VR types differ). A Real variable
+ * has nnfmu_real_size(vr) values: 1, or the length of an FMI 3 array (the init window's <c>_past). */
+NNFMU_INTERNAL size_t nnfmu_real_size(unsigned long vr);
 NNFMU_INTERNAL nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double *value);
-NNFMU_INTERNAL nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double value);
+NNFMU_INTERNAL nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr,
+                                           const double *value);
 NNFMU_INTERNAL nnfmu_status nnfmu_get_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type,
                                           unsigned long vr, long long *value);
 NNFMU_INTERNAL nnfmu_status nnfmu_set_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type,

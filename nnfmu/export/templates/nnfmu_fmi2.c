@@ -109,7 +109,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   size_t i;
   CHECK_INSTANCE();
   for (i = 0; i < nvr; ++i)
-    if (nnfmu_set_real(INSTANCE, "fmi2SetReal", vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+    if (nnfmu_set_real(INSTANCE, "fmi2SetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
 }
 

@@ -120,30 +120,43 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
   return (fmi3Status)nnfmu_reset(INSTANCE);
 }
 
-/* Every variable is a scalar: the value count must equal the value-reference count. */
+/* Integer and Boolean variables are scalars: the value count must equal the value-reference count. */
 static fmi3Status check_count(fmi3Instance instance, const char *caller, size_t n_refs, size_t n_values) {
   if (n_values == n_refs) return fmi3OK;
   return (fmi3Status)nnfmu_error(INSTANCE, "%s: expected nValues = nValueReferences = %lu (all variables are "
                                  "scalars), got %lu", caller, (unsigned long)n_refs, (unsigned long)n_values);
 }
 
+/* Float64 variables may be arrays (the init window's <c>_past): the values follow the references in order. */
+static fmi3Status check_float64_count(fmi3Instance instance, const char *caller, const fmi3ValueReference refs[],
+                                      size_t n_refs, size_t n_values) {
+  size_t i, total = 0;
+  for (i = 0; i < n_refs; ++i) total += nnfmu_real_size(refs[i]);
+  if (n_values == total) return fmi3OK;
+  return (fmi3Status)nnfmu_error(INSTANCE, "%s: expected nValues = %lu (the values of the %lu variables; arrays "
+                                 "count their elements), got %lu", caller, (unsigned long)total,
+                                 (unsigned long)n_refs, (unsigned long)n_values);
+}
+
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                           fmi3Float64 values[], size_t nValues) {
-  size_t i;
+  size_t i, k = 0;
   CHECK_INSTANCE();
-  if (check_count(instance, "fmi3GetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
-  for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_get_real(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[i]) != NNFMU_OK) return fmi3Error;
+  if (check_float64_count(instance, "fmi3GetFloat64", valueReferences, nValueReferences, nValues) != fmi3OK)
+    return fmi3Error;
+  for (i = 0; i < nValueReferences; k += nnfmu_real_size(valueReferences[i++]))
+    if (nnfmu_get_real(INSTANCE, "fmi3GetFloat64", valueReferences[i], &values[k]) != NNFMU_OK) return fmi3Error;
   return fmi3OK;
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                           const fmi3Float64 values[], size_t nValues) {
-  size_t i;
+  size_t i, k = 0;
   CHECK_INSTANCE();
-  if (check_count(instance, "fmi3SetFloat64", nValueReferences, nValues) != fmi3OK) return fmi3Error;
-  for (i = 0; i < nValueReferences; ++i)
-    if (nnfmu_set_real(INSTANCE, "fmi3SetFloat64", valueReferences[i], values[i]) != NNFMU_OK) return fmi3Error;
+  if (check_float64_count(instance, "fmi3SetFloat64", valueReferences, nValueReferences, nValues) != fmi3OK)
+    return fmi3Error;
+  for (i = 0; i < nValueReferences; k += nnfmu_real_size(valueReferences[i++]))
+    if (nnfmu_set_real(INSTANCE, "fmi3SetFloat64", valueReferences[i], &values[k]) != NNFMU_OK) return fmi3Error;
   return fmi3OK;
 }
 

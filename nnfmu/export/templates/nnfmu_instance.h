@@ -37,6 +37,8 @@ typedef struct {
   double y[NNFMU_ALLOC(NNFMU_NY)]; /* outputs after the last sample (before any: the <y>_start values) */
   double y_start[NNFMU_ALLOC(NNFMU_NY)];
   double p[NNFMU_ALLOC(NNFMU_NP)];
+  double past[NNFMU_ALLOC(NNFMU_NPAST)]; /* init window, channel by channel (outputs, then inputs), oldest
+                                            sample first; NaN: not set (the rest state y0 / u0 there) */
   double x[NNFMU_ALLOC(NNFMU_NX)];
 } nnfmu_values;
 
@@ -47,6 +49,7 @@ struct nnfmu_instance {
   int logging_on;
   nnfmu_values v;
   double xa[NNFMU_ALLOC(NNFMU_NX)], xb[NNFMU_ALLOC(NNFMU_NX)], y_next[NNFMU_ALLOC(NNFMU_NY)]; /* step scratch */
+  double y_past[NNFMU_ALLOC(NNFMU_NWIN * NNFMU_NY)], u_past[NNFMU_ALLOC(NNFMU_NWIN * NNFMU_NU)]; /* init's window */
   const casadi_real **arg; /* CasADi's work arrays, sized by the generated *_work functions */
   casadi_real **res;
   casadi_int *iw;

@@ -87,12 +87,36 @@ nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double
   return check_range(inst, caller, t);
 }
 
+/* init's window in CasADi's layout (y_past, u_past: sample by sample, oldest first) from the parameters
+ * <c>_past (channel by channel); a sample not set (NaN) is the rest state: y0, or the first input u0.
+ * Returns the index of an infinite value of the parameters, or -1. */
+static int fill_window(nnfmu_instance *inst, const double *u0) {
+  int c, j;
+  for (c = 0; c < NNFMU_NY + NNFMU_NU; ++c)
+    for (j = 0; j < NNFMU_NWIN; ++j) {
+      double value = inst->v.past[c * NNFMU_NWIN + j];
+      int unset = value != value;
+      if (!unset && !is_finite(value)) return c * NNFMU_NWIN + j;
+      if (c < NNFMU_NY)
+        inst->y_past[j * NNFMU_NY + c] = unset ? inst->v.y_start[c] : value;
+      else
+        inst->u_past[j * NNFMU_NU + c - NNFMU_NY] = unset ? u0[c - NNFMU_NY] : value;
+    }
+  return -1;
+}
+
 static int eval_init(nnfmu_instance *inst, const double *u0, double *x0) {
+  int n = 2;
   inst->arg[0] = inst->v.y_start;
   inst->arg[1] = u0;
 #if NNFMU_NP > 0
-  inst->arg[2] = inst->v.p;
+  inst->arg[n++] = inst->v.p;
 #endif
+#if NNFMU_NWIN > 0
+  inst->arg[n++] = inst->y_past;
+  inst->arg[n++] = inst->u_past;
+#endif
+  (void)n;
   inst->res[0] = x0;
   return NNFMU_INIT(inst->arg, inst->res, inst->iw, inst->w, 0);
 }
@@ -115,6 +139,10 @@ static nnfmu_status advance(nnfmu_instance *inst, const char *caller, long long 
   double *current = inst->xa, *next = inst->xb, *swap;
   long long k;
   int bad;
+  if (!v->x_ready && (bad = fill_window(inst, u_first)) >= 0)
+    return nnfmu_error(inst, "%s: sample %d (1 = the oldest) of the init window %s is %g; give finite values, or "
+                       "NaN where a sample is not known (the rest state is used there)", caller, bad % NNFMU_NWIN + 1,
+                       nnfmu_window_names[bad / NNFMU_NWIN], v->past[bad]);
   if (v->x_ready) memcpy(current, v->x, sizeof v->x);
   else if (eval_init(inst, u_first, current) != 0 || first_non_finite(current, NNFMU_NX) >= 0)
     return nnfmu_error(inst, "%s: the initial state init(y0, u0) is not finite; check the <output>_start values "

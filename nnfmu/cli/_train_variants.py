@@ -1,0 +1,65 @@
+"""``nnfmu train`` beyond one training: ``--seeds K`` (the best or the ensemble) and ``--increment auto``."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def print_test(ds, test, test_window, n: int) -> None:
+    """The free-run test NRMSE from y0 and, with an init window of ``n`` samples, after it."""
+    per_output = ", ".join(f"{c.name} {v:.4f}" for c, v in zip(ds.outputs, test.output_mean))
+    print(f"test free-run NRMSE: {test.mean:.4f} ({per_output}), from the measured y0")
+    if test_window is not None:
+        print(f"test free-run NRMSE after the init window: {test_window.mean:.4f} (samples 0..{n - 1} seen, "
+              f"scored from sample {n})")
+
+
+def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
+    """``--seeds K``: :func:`nnfmu.training.train_seeds`, with every seed's scores and their spread printed."""
+    from nnfmu.training import train_seeds
+
+    if args.resume:
+        from nnfmu.errors import ConfigError
+
+        raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
+                          "drop --resume and run the same command again")
+    result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
+                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads)
+    for note in result.notes:
+        print(f"note: {note}")
+    for r in result.seeds:
+        test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
+        print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
+    spread = result.spread()
+    print(f"kept the {args.keep} of {args.seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
+          f"checkpoint {out}")
+    if result.test is not None:
+        print_test(ds, result.test, result.test_window, model_config.init_window)
+        print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
+    return 0
+
+
+def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out, device, run_one) -> int:
+    """``--increment auto``: train with and without increment mode and keep the lower validation NRMSE."""
+    import shutil
+
+    from nnfmu.errors import ConfigError
+    from nnfmu.models import load_checkpoint
+
+    if args.resume or model_config.arch == "hybrid":
+        raise ConfigError("--increment auto trains two networks into new files: drop --resume (and --arch hybrid)")
+    scores = {}
+    for mode in ("residual", "increment"):
+        part = out.with_name(f"{out.stem}.{mode}.pt")
+        print(f"--- {mode} output mode -> {part}")
+        config = model_config.replace(increment=mode == "increment")
+        status = (run_seeds(args, ds, config, train_config, part, device) if args.seeds is not None
+                  else run_one(args, ds, config, train_config, part, device))
+        if status != 0:
+            return status
+        scores[mode] = load_checkpoint(part)["summary"]["best_valid_nrmse"]
+    best = min(scores, key=scores.get)
+    shutil.copyfile(out.with_name(f"{out.stem}.{best}.pt"), out)
+    print(f"kept the {best} output mode (validation free-run NRMSE {scores['residual']:.4f} residual, "
+          f"{scores['increment']:.4f} increment) in {out}")
+    return 0

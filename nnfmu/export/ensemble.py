@@ -1,0 +1,44 @@
+"""CasADi ``(init, step)`` of an ensemble (:mod:`nnfmu.models.ensemble`): the members side by side, mean fed back.
+
+The members' own Functions (:func:`nnfmu.export.to_casadi`) are called on their slices of the
+state; the ensemble's output is the mean of theirs, and it is written back into every member's
+state as its newest output, in the member's normalised units, at the slot the member's
+``_inject_y`` writes (recurrent and TCN: the first ``n_y`` entries; MLP: the newest window sample).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from nnfmu.export import casadi_nets as nets
+from nnfmu.models import EnsembleStepModel, MLPStepModel, StepModel
+
+
+def _newest_y_slot(member: StepModel) -> int:
+    """Index of the first entry of the newest output ``y_k`` in a member's flat state."""
+    c = member.config
+    return (c.window - 1) * c.n_y if isinstance(member, MLPStepModel) else 0
+
+
+def ensemble_to_casadi(model: EnsembleStepModel, member_to_casadi) -> tuple[ca.Function, ca.Function]:
+    """``init``/``step`` of ``model`` from ``member_to_casadi(member) -> (init, step)`` of each member."""
+    c = model.config
+    pairs = [member_to_casadi(m) for m in model.members]
+    init0 = pairs[0][0]
+    ins = [ca.MX.sym(init0.name_in(i), init0.sparsity_in(i)) for i in range(init0.n_in())]
+    x0 = ca.vertcat(*[init(*ins) for init, _ in pairs])
+    init = ca.Function("init", ins, [x0], init0.name_in(), ["x0"])
+    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
+    parts, offset = [], 0
+    for m in model.members:
+        parts.append(x[offset:offset + m.n_x])
+        offset += m.n_x
+    steps = [step(part, u) for (_, step), part in zip(pairs, parts)]
+    y_next = sum(y for _, y in steps) / len(steps)
+    yn_next = (y_next - nets.dm(model.y_mean)) / nets.dm(model.y_std)
+    x_next = []
+    for m, (xn, _) in zip(model.members, steps):
+        k = _newest_y_slot(m)
+        x_next.append(ca.vertcat(xn[:k], yn_next, xn[k + c.n_y:]))
+    step = ca.Function("step", [x, u], [ca.vertcat(*x_next), y_next], ["x", "u"], ["x_next", "y_next"])
+    return init, step

@@ -1,0 +1,86 @@
+"""An ensemble of K networks of one config, simulated as one model (``ModelConfig.members = K``).
+
+Each member keeps its own state; at every step all members predict ``y_{k+1}`` from their state
+and the input, and their **mean** is the ensemble's prediction, fed back into every member as its
+newest output (the one prediction of the free run)::
+
+    x = [ x^(1) | ... | x^(K) ]                 each member's own flat state layout
+    y_{k+1}^(i) = step_i(x^(i), u_k)            i = 1 .. K
+    y_{k+1}     = mean_i y_{k+1}^(i)           then written into every x^(i) as its y_{k+1}
+
+Averaging seeds removes much of the seed-to-seed variance of small-data training; feeding the
+mean back (instead of running K free runs and averaging them afterwards) keeps it one model with
+one state, so it exports as one FMU. The members share the normalisation of their training split.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import torch
+from torch import nn
+
+from nnfmu.errors import ShapeError
+from nnfmu.models import architectures
+from nnfmu.models.base import StepModel
+from nnfmu.models.config import ModelConfig
+
+
+class EnsembleStepModel(StepModel):
+    """``config.members`` networks of ``config.replace(members=1)``; see the module docstring."""
+
+    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+        super().__init__(config, meta)
+        if config.members < 2:
+            raise ShapeError(f"an ensemble needs members >= 2, got {config.members}; build a single network instead")
+        member = config.replace(members=1)
+        cls = architectures.model_class(member.arch)
+        self.members = nn.ModuleList(cls(member, meta) for _ in range(config.members))
+        self._check_sizes()
+
+    @classmethod
+    def from_members(cls, models: Sequence[StepModel]) -> "EnsembleStepModel":
+        """The ensemble of trained networks of one config, meta and normalisation (weights copied)."""
+        first = models[0]
+        if len(models) < 2 or any(m.config != first.config for m in models):
+            raise ShapeError("an ensemble needs at least 2 trained networks of the same config")
+        for name in ("u_mean", "u_std", "y_mean", "y_std"):
+            if any(not torch.equal(getattr(m, name), getattr(first, name)) for m in models):
+                raise ShapeError(f"the networks have different normalisation ({name}); train them on the same data")
+        ensemble = cls(first.config.replace(members=len(models)), first.meta).to(first.u_mean.dtype)
+        for target, source in zip(ensemble.members, models):
+            target.load_state_dict(source.state_dict())
+        for name in ("u_mean", "u_std", "y_mean", "y_std"):
+            getattr(ensemble, name).copy_(getattr(first, name))
+        return ensemble
+
+    def set_normalisation(self, stats) -> None:
+        super().set_normalisation(stats)
+        for m in self.members:
+            m.set_normalisation(stats)
+
+    def set_increment_scale(self, dy_std) -> None:
+        super().set_increment_scale(dy_std)
+        for m in self.members:
+            m.set_increment_scale(dy_std)
+
+    @property
+    def n_x(self) -> int:
+        return sum(m.n_x for m in self.members)
+
+    def _parts(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return torch.split(x, [m.n_x for m in self.members], dim=1)
+
+    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m._init_norm(yn0, un0) for m in self.members], dim=1)
+
+    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m._init_window_norm(yn_win, un_win) for m in self.members], dim=1)
+
+    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        steps = [m._step_norm(part, un) for m, part in zip(self.members, self._parts(x))]
+        yn = torch.stack([y for _, y in steps]).mean(0)
+        return self._inject_y(torch.cat([x_next for x_next, _ in steps], dim=1), yn), yn
+
+    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m._inject_y(part, yn) for m, part in zip(self.members, self._parts(x))], dim=1)

@@ -1,0 +1,244 @@
+"""``train_seeds``: the same network trained from K seeds, then the best on validation or their ensemble kept.
+
+On small data a seed moves the result more than a training strategy does (issue 11: 0.199 against
+0.286 for one GRU on one plant), so one run says little. ``train_seeds`` trains K seeds (in
+parallel processes where there are cores), each a normal resumable :func:`train` into
+``<out>.seeds/seed-<s>.pt``, and writes to ``out`` either
+
+- ``keep="best"``: the seed with the lowest validation NRMSE, or
+- ``keep="ensemble"``: all K as one :class:`~nnfmu.models.EnsembleStepModel` (their mean output
+  fed back as the one prediction), which exports as one FMU.
+
+The result lists every seed's validation and test scores, so the spread over seeds is reported
+next to the kept model's. The validation split is fixed once (carved with the base seed), so
+every seed is trained and chosen on the same data.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nnfmu.data import Dataset, save_dataset
+from nnfmu.errors import CheckpointError, ConfigError, TrainingError
+from nnfmu.metrics import NrmseResult
+from nnfmu.models import EnsembleStepModel, ModelConfig, StepModel, load_checkpoint, load_model, save_checkpoint
+from nnfmu.training.config import TrainConfig
+from nnfmu.training.evaluate import free_run_nrmse
+from nnfmu.training.horizons import validation_trajectories
+from nnfmu.training.trainer import _as_train_config, _prepare, train
+
+KEEP = ("best", "ensemble")
+
+
+@dataclass(frozen=True)
+class SeedsResult:
+    """What :func:`train_seeds` returns.
+
+    Attributes
+    ----------
+    model : StepModel
+        The kept model (the best seed, or the ensemble), in eval mode, as saved at ``checkpoint``.
+    keep : {'best', 'ensemble'}
+    valid_nrmse : float
+        The kept model's validation free-run NRMSE (the trainer's protocol).
+    test, test_window : NrmseResult or None
+        The kept model's float64 free-run test scores (from y0; after the init window).
+    seeds : list of dict
+        Per seed: ``seed``, ``checkpoint``, ``best_valid_nrmse``, ``test_nrmse``, ``test_nrmse_window``,
+        ``best_epoch``, ``epochs_run``, ``stop_reason``, ``error`` (why a failed seed stopped; its best
+        weights before the failure are used).
+    checkpoint : Path
+    notes : list of str
+    """
+
+    model: StepModel
+    keep: str
+    valid_nrmse: float
+    test: NrmseResult | None
+    test_window: NrmseResult | None
+    seeds: list
+    checkpoint: Path
+    notes: list = field(default_factory=list)
+
+    @property
+    def test_nrmse(self) -> float | None:
+        return None if self.test is None else self.test.mean
+
+    def spread(self, key: str = "test_nrmse") -> dict:
+        """``{mean, min, max}`` of a per-seed score over the seeds (None values left out)."""
+        values = [s[key] for s in self.seeds if s.get(key) is not None]
+        if not values:
+            return {"mean": None, "min": None, "max": None}
+        return {"mean": float(np.mean(values)), "min": float(min(values)), "max": float(max(values))}
+
+
+def seed_paths(out: Path, seeds: list[int]) -> list[Path]:
+    """Where the member checkpoints of ``out`` live: ``<out stem>.seeds/seed-<s>.pt`` beside it."""
+    folder = out.parent / f"{out.stem}.seeds"
+    return [folder / f"seed-{s}.pt" for s in seeds]
+
+
+def _error_file(path: Path) -> Path:
+    """Where a seed whose training failed (e.g. a NaN loss) records why; its best weights so far stay in ``path``."""
+    return path.with_suffix(".error.txt")
+
+
+def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str:
+    """'new', 'unfinished' or 'finished' (or failed); ConfigError if the file holds a run of other settings."""
+    if not path.exists():
+        _error_file(path).unlink(missing_ok=True)
+        return "new"
+    try:
+        ckpt = load_checkpoint(path)
+    except CheckpointError:  # a damaged member is trained again
+        path.unlink()
+        return "new"
+    if ckpt.get("model_config") != model_config.to_dict() or ckpt.get("train_config") != cfg.to_dict():
+        raise ConfigError(f"{path} holds a training with other settings; delete {path.parent} or choose another out")
+    done = "stop_reason" in (ckpt.get("summary") or {}) or _error_file(path).exists()
+    return "finished" if done else "unfinished"
+
+
+def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
+               device="auto", threads: int | None = None) -> str:
+    """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
+    state = _member_state(path, model_config, cfg)
+    if state == "finished":
+        return "done"
+    try:
+        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress,
+                     device=device, threads=threads).stop_reason
+    except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
+        _error_file(path).write_text(f"{exc}\n")
+        return "failed"
+
+
+def _train_in_processes(work: list, jobs: int, device, threads: int | None) -> None:
+    """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
+
+    Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard.
+    """
+    with tempfile.TemporaryDirectory(prefix="nnfmu-seeds-") as tmp:
+        data = Path(tmp) / "dataset"
+        save_dataset(work[0][0], data)
+        env = {**os.environ, "OMP_NUM_THREADS": "1"}
+        pending, running, failed = list(work), [], []
+        while pending or running:
+            while pending and len(running) < jobs:
+                _, model_config, cfg, path, _ = pending.pop(0)
+                args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
+                        json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
+                        str(threads or 1)]
+                running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
+                                                       stderr=subprocess.PIPE, text=True)))
+            path, proc = running.pop(0)
+            _, err = proc.communicate()
+            if proc.returncode != 0:
+                failed.append(f"{path.name}: {err.strip().splitlines()[-1] if err.strip() else proc.returncode}")
+        if failed:
+            raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
+                                "seeds are kept, run the same call again to continue")
+
+
+def _jobs(jobs: int | None, k: int) -> int:
+    if jobs is None:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"jobs must be a positive integer number of processes, got {jobs!r}")
+    return min(jobs, k)
+
+
+def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
+                seeds: int = 3, keep: str = "ensemble", out: str | os.PathLike, jobs: int | None = None,
+                progress: bool = False, device="auto", threads: int | None = None) -> SeedsResult:
+    """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
+
+    Parameters
+    ----------
+    dataset : Dataset
+    model_config : ModelConfig
+        One network (``members = 1``).
+    train_config : TrainConfig, optional
+    seeds : int
+        K >= 2 seeds.
+    keep : {'best', 'ensemble'}
+        See the module docstring.
+    out : path
+        The kept model's checkpoint; members go to ``<stem>.seeds/``. Finished members are not
+        trained again and unfinished ones resume, so a stopped call continues where it was.
+    jobs : int, optional
+        Processes training at once (default: the cores this process may use, at most K).
+    progress : bool
+        Progress bars (only with ``jobs=1``).
+    device, threads :
+        As in :func:`train`, for every seed.
+    """
+    if keep not in KEEP:
+        raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 2:
+        raise ConfigError(f"seeds must be an integer >= 2 (one seed is a plain train), got {seeds!r}")
+    if not isinstance(model_config, ModelConfig) or model_config.members != 1:
+        raise ConfigError("train_seeds trains one network per seed: pass a ModelConfig with members=1")
+    cfg = _as_train_config(train_config)
+    dataset, notes = _prepare(dataset, cfg)  # one validation split for every seed
+    out = Path(out)
+    seed_list = [cfg.seed + i for i in range(seeds)]
+    paths = seed_paths(out, seed_list)
+    paths[0].parent.mkdir(parents=True, exist_ok=True)
+    work = [(dataset, model_config, cfg.replace(seed=s), p, progress and jobs == 1) for s, p in zip(seed_list, paths)]
+    n_jobs = _jobs(jobs, seeds)
+    if n_jobs == 1:
+        for item in work:
+            if _train_one(*item, device=device, threads=threads) in ("SIGINT", "SIGTERM"):
+                break
+    else:
+        for _, mc, c, path, _ in work:  # settings clashes are reported here, before any process starts
+            _member_state(path, mc, c)
+        _train_in_processes(work, n_jobs, device, threads)
+    if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
+        raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
+                                f"ones' checkpoints are in {paths[0].parent}: run the same call again to continue")
+    return _keep(dataset, cfg, keep, seed_list, paths, out, notes)
+
+
+def _seed_row(seed: int, path: Path) -> dict:
+    ckpt = load_checkpoint(path)
+    summary = ckpt.get("summary") or {}
+    return {"seed": seed, "checkpoint": str(path), "best_valid_nrmse": summary.get("best_valid_nrmse"),
+            "test_nrmse": summary.get("test_nrmse"), "test_nrmse_window": summary.get("test_nrmse_window"),
+            "best_epoch": ckpt.get("best_epoch"), "epochs_run": summary.get("epochs_run"),
+            "stop_reason": summary.get("stop_reason") or "failed",
+            "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
+            "error": _error_file(path).read_text().strip() if _error_file(path).exists() else None}
+
+
+def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,
+          notes: list) -> SeedsResult:
+    rows = [_seed_row(s, p) for s, p in zip(seed_list, paths)]
+    models = [load_model(p) for p in paths]
+    valid, valid_notes = validation_trajectories(dataset, cfg)
+    n = models[0].config.init_window
+    if keep == "best":
+        best = min(range(len(rows)), key=lambda i: rows[i]["best_valid_nrmse"])
+        model, valid_nrmse = models[best], rows[best]["best_valid_nrmse"]
+        notes = notes + [f"kept seed {rows[best]['seed']} (lowest validation NRMSE)"]
+    else:
+        model = EnsembleStepModel.from_members(models).eval()
+        result = free_run_nrmse(model, valid, context=n)
+        valid_nrmse = float("inf") if result is None else result.mean
+    test = free_run_nrmse(model, dataset.test, float64=True) if "test" in dataset.splits else None
+    window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 and test is not None else None
+    summary = {"best_valid_nrmse": valid_nrmse, "test_nrmse": None if test is None else test.mean,
+               "test_nrmse_window": None if window is None else window.mean, "stop_reason": "seeds",
+               "keep": keep, "seeds": rows, "valid_samples": valid.n_samples, "notes": notes + valid_notes}
+    save_checkpoint(out, model, train_config=cfg.to_dict(), history=[], best_epoch=None, summary=summary)
+    model = load_model(out)
+    return SeedsResult(model, keep, valid_nrmse, test, window, rows, out, notes + valid_notes)
