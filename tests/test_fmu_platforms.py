@@ -51,14 +51,15 @@ N_STEPS = 150
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    """A small GRU checkpoint exported for every platform as each of CASES: {case: fmu}."""
+    """A small GRU with an init window (its encoder and window code on every platform), exported for every
+    platform as each of CASES: {case: fmu}."""
     zig_or_skip()
     folder = tmp_path_factory.mktemp("platforms")
     meta = {"name": "valve_gru", "Ts": 4e-5, "input_range": [[0.0, 10.0], [0.0, 10.0]],
             "inputs": [{"name": "u1", "unit": "V"}, {"name": "u2", "unit": "V"}],
             "outputs": [{"name": "s", "unit": "m"}, {"name": "p", "unit": "Pa"}]}
     torch.manual_seed(3)
-    net = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, hidden=8), meta)
+    net = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, hidden=8, init_window=3), meta)
     with torch.no_grad():
         net.u_mean.fill_(1.2), net.u_std.fill_(0.7)
         net.y_mean.copy_(torch.tensor([5e-4, 3e5])), net.y_std.copy_(torch.tensor([2e-4, 1e5]))

@@ -141,8 +141,9 @@ static nnfmu_status advance(nnfmu_instance *inst, const char *caller, long long 
   int bad;
   if (!v->x_ready && (bad = fill_window(inst, u_first)) >= 0)
     return nnfmu_error(inst, "%s: sample %d (1 = the oldest) of the init window %s is %g; give finite values, or "
-                       "NaN where a sample is not known (the rest state is used there)", caller, bad % NNFMU_NWIN + 1,
-                       nnfmu_window_names[bad / NNFMU_NWIN], v->past[bad]);
+                       "NaN where a sample is not known (the rest state is used there)", caller,
+                       bad % NNFMU_ALLOC(NNFMU_NWIN) + 1, /* ALLOC: no constant division by 0 without a window */
+                       nnfmu_window_names[bad / NNFMU_ALLOC(NNFMU_NWIN)], v->past[bad]);
   if (v->x_ready) memcpy(current, v->x, sizeof v->x);
   else if (eval_init(inst, u_first, current) != 0 || first_non_finite(current, NNFMU_NX) >= 0)
     return nnfmu_error(inst, "%s: the initial state init(y0, u0) is not finite; check the <output>_start values "
