@@ -9,8 +9,9 @@ linear baseline and the target. Not part of the test run.
     python benchmarks/accuracy_targets.py robot --data FILE.mat --linear 0.853 --target 0.70
     python benchmarks/accuracy_targets.py slider --archs gru mlp
 
-``--linear`` takes the linear baseline's test NRMSE (the robot's takes half an hour to identify);
-without it the baseline is identified here with the budget's options. Torch runs on one thread.
+``--linear`` takes the linear baseline's test NRMSE; without it the baseline is identified here with
+the budget's options (about a minute for the robot). Torch runs on one thread per training; ``--jobs 2``
+trains a network's seeds side by side.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def _linear(ds, options: dict) -> float:
     return nrmse(list(ds.test.y), [model.simulate(u, y[0]) for u, y in zip(ds.test.u, ds.test.y)]).mean
 
 
-def _train(ds, budget, arch: str, seed: int, out: Path):
+def _train(ds, budget, arch: str, seed: int, out: Path, jobs: int):
     from nnfmu.training import train, train_seeds
 
     hyper = budget.hyper[arch]
@@ -50,7 +51,7 @@ def _train(ds, budget, arch: str, seed: int, out: Path):
     train_config = hyper.train_config(strategy="parallel", epochs=budget.epochs, patience=budget.patience, seed=seed,
                                       max_minutes=budget.max_minutes)
     if budget.seeds > 1:
-        r = train_seeds(ds, model_config, train_config, seeds=budget.seeds, keep=budget.keep, out=out, jobs=1)
+        r = train_seeds(ds, model_config, train_config, seeds=budget.seeds, keep=budget.keep, out=out, jobs=jobs)
         return r.valid_nrmse, r.test_nrmse, r.spread()
     r = train(ds, model_config, train_config, out=out)
     return r.best_valid_nrmse, r.test_nrmse, None
@@ -65,6 +66,7 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--linear", type=float, help="the linear baseline's test NRMSE (default: identify it here)")
     p.add_argument("--target", type=float, help="print whether each network reaches this test NRMSE")
+    p.add_argument("--jobs", type=int, default=1, help="seeds trained side by side (default 1)")
     args = p.parse_args()
     torch.set_num_threads(1)
     budget = get_budget(args.system, args.budget)
@@ -79,7 +81,7 @@ def main() -> None:
               "beats linear" + ("  target" if args.target else ""))
         for arch in args.archs or budget.archs:
             cpu0, wall0 = _cpu_seconds(), time.perf_counter()
-            valid, test, spread = _train(ds, budget, arch, args.seed, Path(tmp) / f"{arch}.pt")
+            valid, test, spread = _train(ds, budget, arch, args.seed, Path(tmp) / f"{arch}.pt", args.jobs)
             cpu, wall = _cpu_seconds() - cpu0, time.perf_counter() - wall0
             seeds = f"{spread['mean']:.4f} [{spread['min']:.4f}-{spread['max']:.4f}]" if spread else "-"
             verdicts = ("yes" if test < linear else "NO") + (
