@@ -239,6 +239,33 @@ def test_order_larger_than_the_data_allow(exact_data):
         identify_linear(exact_data, order=6, refine=False)
 
 
+def test_identification_runs_on_the_configured_blas_threads(noisy_data, monkeypatch):
+    """The BLAS thread count changes the refinement's end point (robot: 0.8514 on one thread, 0.8528 on
+    two), so the baseline must not inherit it from the machine: inside, BLAS runs on ``threads``."""
+    import nnfmu.linear.identify as identify
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return {pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"}
+
+    seen = []
+    real_refine = identify.refine
+
+    def spy(*args, **kwargs):
+        seen.append(blas_threads())
+        return real_refine(*args, **kwargs)
+
+    monkeypatch.setattr(identify, "refine", spy)
+    with threadpool_limits(limits=2, user_api="blas"):
+        outer = blas_threads()
+        one = identify_linear(noisy_data, order=2, max_evaluations=20)
+        two = identify_linear(noisy_data, order=2, max_evaluations=20, threads=2)
+        after = blas_threads()
+    assert seen[0] == {1}
+    assert seen[1] == outer and after == outer  # threads=2 runs on the caller's two; the caller's setting is restored
+    assert one.info["config"]["threads"] == 1 and two.info["config"]["threads"] == 2
+
+
 def test_option_errors(exact_data):
     with pytest.raises(UnknownOptionError, match="valid options are: .*max_order"):
         identify_linear(exact_data, ordr=3)
@@ -246,6 +273,8 @@ def test_option_errors(exact_data):
         LinearConfig(init="zero")
     with pytest.raises(ConfigError, match="positive integer"):
         LinearConfig(order=0)
+    with pytest.raises(ConfigError, match="threads must be a positive integer"):
+        LinearConfig(threads=0)
     with pytest.raises(ConfigError, match="not both"):
         identify_linear(exact_data, LinearConfig(order=2), order=3)
     unstable = true_system(radius=1.1)

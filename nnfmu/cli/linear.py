@@ -32,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-evaluations", type=int, default=None, metavar="N",
                    help="cost evaluations allowed to the refinement (default 1000 for quasi-newton, 100 for "
                         "gauss-newton)")
+    p.add_argument("--threads", type=int, default=1, metavar="N",
+                   help="BLAS threads (default 1: faster here, and the result does not depend on the core count)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
     p.add_argument("--save", metavar="FILE", help="also (or only) write A, B, C, D and offsets as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bars (orders tried, refinement cost)")
@@ -76,7 +78,8 @@ def _run(args: argparse.Namespace) -> int:
         check_at_most(option, value, MAX_LINEAR_ORDER, "MAX_LINEAR_ORDER")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           refine=not args.no_refine, refine_x0=args.refine_x0,
-                          refine_method=args.refine_method, max_evaluations=args.max_evaluations)
+                          refine_method=args.refine_method, max_evaluations=args.max_evaluations,
+                          threads=args.threads)
     dataset = load_dataset(args.data)
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
