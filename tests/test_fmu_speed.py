@@ -89,6 +89,28 @@ def test_exact_profile_computes_the_same_bits_as_casadi(networks, valve_inputs, 
     np.testing.assert_array_equal(fmpy_simulate(fmu, model, *valve_inputs), model.simulate(*valve_inputs))
 
 
+CLANG_LIKE = """#!/bin/sh
+# a compiler that says it is clang and, like clang and zig cc, rejects GCC's own flags; it compiles with gcc
+if [ "$1" = "-dM" ]; then echo "#define __GNUC__ 4"; echo "#define __clang__ 1"; exit 0; fi
+for a in "$@"; do
+  case "$a" in -fno-tree-loop-distribute-patterns) echo "error: unknown argument: '$a'" >&2; exit 1;; esac
+done
+exec gcc "$@"
+"""
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc behind the clang-like compiler")
+def test_fast_profile_builds_with_a_compiler_that_is_not_gcc(networks, fmus, valve_inputs, tmp_path):
+    """The fast profile's GCC-only flag must not reach clang (or zig cc): users with CC=clang get the same FMU."""
+    fake = tmp_path / "clang-like"
+    fake.write_text(CLANG_LIKE)
+    fake.chmod(0o755)
+    model = casadi_model(networks["gru"])
+    fmu = build_fmu(model, tmp_path / "clang.fmu", options=BuildOptions(compiler=str(fake)))
+    got = fmpy_simulate(fmu, model, *valve_inputs)
+    assert rel_error(got, fmpy_simulate(fmus["gru", "float64"], model, *valve_inputs)) < 1e-12
+
+
 def test_float32_costs_less_than_1e_3_nrmse_on_the_valve_test_set(valve_small, tmp_path):
     from nnfmu.cosim import evaluate
     from nnfmu.models.base import torch_threads

@@ -3,11 +3,13 @@
 Every compile (the FMU's binary, the benchmark drivers) goes through
 :func:`run_compiler`, which raises :class:`nnfmu.errors.FmuBuildError` with
 the compiler's stderr attached (as the message's tail and as ``.stderr``)
-when the compiler is missing, fails or hangs.
+when the compiler is missing, fails or hangs. Flags that only GCC understands
+(:data:`GCC_ONLY_FLAGS`) reach GCC alone: clang and ``zig cc`` reject them.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import shlex
 import shutil
@@ -24,10 +26,17 @@ DEFAULT_FLAGS = ("-O3", "-std=c99", "-ffp-contract=off", "-fPIC", "-fvisibility=
 #: Flags of the FMU build profiles (nnfmu.export.codegen): "exact" is DEFAULT_FLAGS; "fast" lets the
 #: compiler fuse a*b+c into FMA, and -fno-trapping-math lets it turn the branch-free selects of the
 #: vector exp/tanh into blends (the FMU never unmasks floating-point traps, so nothing else changes).
+#: The fast profile also asks GCC not to turn loops into memcpy/memset calls: CasADi's code copies and
+#: clears short work arrays in loops, which GCC otherwise expands to ``rep movs``/``rep stos``, each
+#: with a start-up of tens of cycles; as loops they vectorise (the default GRU and LSTM steps take
+#: about 10 % less time, docs/fmu-speed.md).
 PROFILE_FLAGS = {
     "exact": DEFAULT_FLAGS,
-    "fast": ("-O3", "-std=c99", "-ffp-contract=fast", "-fno-trapping-math", "-fPIC", "-fvisibility=hidden"),
+    "fast": ("-O3", "-std=c99", "-ffp-contract=fast", "-fno-trapping-math", "-fno-tree-loop-distribute-patterns",
+             "-fPIC", "-fvisibility=hidden"),
 }
+#: Flags that only GCC takes; :func:`run_compiler` leaves them out for any other compiler.
+GCC_ONLY_FLAGS = frozenset({"-fno-tree-loop-distribute-patterns"})
 CANDIDATES = ("cc", "gcc", "clang")
 
 
@@ -48,6 +57,20 @@ def find_compiler(compiler: str | None = None) -> str:
         f"(e.g. 'apt-get install gcc'), or set CC / pass compiler='/path/to/cc'")
 
 
+@functools.lru_cache(maxsize=None)
+def is_gcc(cc: str) -> bool:
+    """Whether the compiler ``cc`` (a path, as :func:`find_compiler` returns it) is GCC: its preprocessor
+    defines ``__GNUC__`` and not ``__clang__``. A compiler that cannot answer (``zig``, whose C compiler is
+    the ``zig cc`` subcommand, is clang) counts as not GCC."""
+    try:
+        done = subprocess.run([cc, "-dM", "-E", "-x", "c", os.devnull], capture_output=True, text=True,
+                              timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    macros = done.stdout.split()
+    return done.returncode == 0 and "__GNUC__" in macros and "__clang__" not in macros
+
+
 def run_compiler(args: Sequence[str], *, what: str, compiler: str | None = None,
                  cwd: str | Path | None = None, timeout_s: float = 600.0) -> subprocess.CompletedProcess:
     """Run ``<compiler> args``; raise FmuBuildError with the compiler's stderr if it fails.
@@ -55,6 +78,8 @@ def run_compiler(args: Sequence[str], *, what: str, compiler: str | None = None,
     ``what`` names the job for the message ("compiling the FMU binary for 'valve'").
     """
     cc = find_compiler(compiler)
+    if not is_gcc(cc):
+        args = [a for a in args if a not in GCC_ONLY_FLAGS]
     command = [cc, *args]
     try:
         done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout_s)
