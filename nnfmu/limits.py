@@ -22,6 +22,10 @@ MAX_PARAMETERS = 50_000_000
 MAX_BATCH_SIZE = 100_000
 MAX_LINEAR_ORDER = 200
 MAX_RK4_SUBSTEPS = 10_000
+#: An epoch limit that no time budget reaches: ``TrainConfig(epochs=UNBOUNDED_EPOCHS, max_minutes=M)``
+#: trains until the wall-clock budget ends (``nnfmu train --max-minutes M`` alone), and its progress bar
+#: counts time instead of epochs.
+UNBOUNDED_EPOCHS = 10**9
 
 
 def count_parameters(model_config, meta: dict | None = None) -> int:

@@ -20,20 +20,23 @@ def tqdm(*args, **kwargs):
     return bar(*args, **kwargs)
 
 
-def training_bar(epoch: int, epochs: int, max_minutes: float | None, *, desc: str, progress: bool):
-    """The bar of one training call: over the epochs, or over the time budget when there is one.
+def training_bar(epoch: int, epochs: int, max_minutes: float | None, *, time_bound: bool, desc: str,
+                 progress: bool):
+    """The bar of one training call, over what bounds it.
 
-    With a budget (``max_minutes``) the bar counts seconds and shows the time left of the budget;
-    :func:`advance` keeps the epoch count in its description.
+    ``time_bound`` (the budget ``max_minutes`` alone ends the training): the bar counts seconds, shows
+    the time used of the budget, and :func:`advance` keeps the epoch count in its description.
+    Otherwise it counts epochs; a ``max_minutes`` safety net is named in the description.
     """
-    if max_minutes is None:
-        return tqdm(total=epochs, initial=min(epoch, epochs), disable=not progress, unit="epoch", desc=desc,
-                    dynamic_ncols=True)
     from tqdm import tqdm as text_bar
 
+    if not time_bound:
+        limit = "" if max_minutes is None else f" (time limit {text_bar.format_interval(round(60.0 * max_minutes))})"
+        return tqdm(total=epochs, initial=min(epoch, epochs), disable=not progress, unit="epoch", desc=desc + limit,
+                    dynamic_ncols=True)
     total = round(60.0 * max_minutes)
     bar = tqdm(total=total, disable=not progress, unit="s", desc=f"{desc} epoch {epoch}", dynamic_ncols=True,
-               smoothing=0, bar_format="{desc} |{bar}| {remaining} left of " + text_bar.format_interval(total)
+               smoothing=0, bar_format="{desc} |{bar}| {elapsed} of " + text_bar.format_interval(total)
                + " budget{postfix}")
     bar.budget_desc, bar.budget_start = desc, time.monotonic()
     return bar

@@ -28,7 +28,16 @@ def test_max_minutes_alone_is_the_only_limit(data_dir, tmp_path, capsys):
     assert ckpt["summary"]["stop_reason"] == "time-budget"
     assert ckpt["best_epoch"] == min(range(len(ckpt["history"])), key=lambda e: ckpt["history"][e]["valid_nrmse"])
     assert "stopped: time-budget" in captured.out
-    assert "left of 00:02 budget" in captured.err and "epoch 1 " in captured.err
+    assert "of 00:02 budget" in captured.err and "epoch 1 " in captured.err
+
+
+def test_bar_counts_epochs_when_epochs_bound_the_run_and_names_the_time_limit(data_dir, tmp_path, capsys):
+    """The presets' wall clock is a safety net: the bar shows the epochs, and never more time left than the limit."""
+    assert main(["train", "--data", str(data_dir), "--arch", "mlp", "--hidden", "4", "--truncate", "30",
+                 "--max-minutes", "60", "--epochs", "3", "-o", str(tmp_path / "m.pt")]) == 0
+    err = capsys.readouterr().err
+    assert "mlp parallel (time limit 1:00:00)" in err and "3/3" in err
+    assert "budget" not in err
 
 
 def test_max_minutes_with_epochs_keeps_both_limits(data_dir, tmp_path):

@@ -19,6 +19,7 @@ import argparse
 
 from nnfmu.cli._resources import add_resource_options, check_resource_options
 from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
+from nnfmu.limits import UNBOUNDED_EPOCHS
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -52,7 +53,7 @@ _TRAIN_OPTIONS = (
     ("--seed", "seed", int, "random seed (default 0)"),
     ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none). Alone (without --epochs "
      "and --patience) it means: train until the budget is spent and keep the best epoch; the progress bar shows "
-     "the time left"),
+     "the time spent of it; with --epochs the bar counts epochs"),
     ("--feedback-noise", "feedback_noise", float,
      "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
@@ -71,7 +72,7 @@ _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosi
 
 
 # --max-minutes alone: no epoch limit that a budget could reach, and no early stopping
-BUDGET_EPOCHS = 10**9
+BUDGET_EPOCHS = UNBOUNDED_EPOCHS
 
 # (option, HybridConfig field, type, help): only with --arch hybrid.
 _HYBRID_OPTIONS = (

@@ -31,7 +31,8 @@ class TrainConfig:
         predictions, gradients flow through the whole rollout). Series-parallel:
         the loss is one step ahead with the measured outputs fed in.
     epochs : int
-        Maximum number of passes over the training split.
+        Maximum number of passes over the training split; :data:`nnfmu.limits.UNBOUNDED_EPOCHS` with
+        ``max_minutes`` lets the wall-clock budget alone end the training.
     batch_size : int
         Trajectories (or truncated windows) per optimiser step.
     lr, weight_decay : float
