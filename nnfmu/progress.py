@@ -10,6 +10,8 @@ from __future__ import annotations
 import importlib.util
 import time
 
+from nnfmu.limits import UNBOUNDED_EPOCHS
+
 
 def tqdm(*args, **kwargs):
     """A tqdm bar: the notebook widget if ipywidgets is installed (tqdm.auto), else the text bar."""
@@ -20,17 +22,17 @@ def tqdm(*args, **kwargs):
     return bar(*args, **kwargs)
 
 
-def training_bar(epoch: int, epochs: int, max_minutes: float | None, *, time_bound: bool, desc: str,
-                 progress: bool):
+def training_bar(epoch: int, epochs: int, max_minutes: float | None, *, desc: str, progress: bool):
     """The bar of one training call, over what bounds it.
 
-    ``time_bound`` (the budget ``max_minutes`` alone ends the training): the bar counts seconds, shows
-    the time used of the budget, and :func:`advance` keeps the epoch count in its description.
-    Otherwise it counts epochs; a ``max_minutes`` safety net is named in the description.
+    When the budget ``max_minutes`` alone ends the training (``epochs`` is
+    :data:`nnfmu.limits.UNBOUNDED_EPOCHS`), the bar counts seconds, shows the time used of the
+    budget, and :func:`advance` keeps the epoch count in its description. Otherwise it counts
+    epochs; a ``max_minutes`` safety net is named in the description.
     """
     from tqdm import tqdm as text_bar
 
-    if not time_bound:
+    if max_minutes is None or epochs < UNBOUNDED_EPOCHS:
         limit = "" if max_minutes is None else f" (time limit {text_bar.format_interval(round(60.0 * max_minutes))})"
         return tqdm(total=epochs, initial=min(epoch, epochs), disable=not progress, unit="epoch", desc=desc + limit,
                     dynamic_ncols=True)

@@ -3,8 +3,8 @@
 import pytest
 
 from nnfmu.cli import main
-from nnfmu.cli.train import BUDGET_EPOCHS
 from nnfmu.data import Trajectories, save_dataset
+from nnfmu.limits import UNBOUNDED_EPOCHS
 from nnfmu.models import load_checkpoint
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -24,7 +24,7 @@ def test_max_minutes_alone_is_the_only_limit(data_dir, tmp_path, capsys):
                  "--max-minutes", "0.03", "-o", str(out)]) == 0
     captured = capsys.readouterr()
     ckpt = load_checkpoint(out)
-    assert ckpt["train_config"]["epochs"] == BUDGET_EPOCHS and ckpt["train_config"]["patience"] == 0
+    assert ckpt["train_config"]["epochs"] == UNBOUNDED_EPOCHS and ckpt["train_config"]["patience"] == 0
     assert ckpt["summary"]["stop_reason"] == "time-budget"
     assert ckpt["best_epoch"] == min(range(len(ckpt["history"])), key=lambda e: ckpt["history"][e]["valid_nrmse"])
     assert "stopped: time-budget" in captured.out

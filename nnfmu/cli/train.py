@@ -71,9 +71,6 @@ _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosi
             "valid_horizon": ("auto", "split", "joined")}
 
 
-# --max-minutes alone: no epoch limit that a budget could reach, and no early stopping
-BUDGET_EPOCHS = UNBOUNDED_EPOCHS
-
 # (option, HybridConfig field, type, help): only with --arch hybrid.
 _HYBRID_OPTIONS = (
     ("--physics", "physics", str, "physics model of a hybrid: valve or arm (required with --arch hybrid)"),
@@ -140,7 +137,7 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
     if args.join is not None:
         changes["join"] = True
     if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
-        changes.update(epochs=BUDGET_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
+        changes.update(epochs=UNBOUNDED_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
         changes["strategy"] = args.strategy
     if hybrid and changes.get("strategy", "parallel") != "parallel":

@@ -29,7 +29,6 @@ import torch
 
 from nnfmu.data import Dataset
 from nnfmu.errors import CheckpointError, ConfigError
-from nnfmu.limits import UNBOUNDED_EPOCHS
 from nnfmu.metrics import NrmseResult
 from nnfmu.models.base import StepModel, torch_threads
 from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
@@ -276,7 +275,6 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
         session.record(None, session.validate(), 0.0, False)
         session.save()
     bar = training_bar(session.epoch, cfg.epochs, cfg.max_minutes, progress=progress,
-                       time_bound=cfg.max_minutes is not None and cfg.epochs >= UNBOUNDED_EPOCHS,
                        desc=f"{session.model.config.arch} {cfg.strategy}")
     with StopRequests() as stop, bar:
         _show(bar, session.history[-1])
