@@ -44,7 +44,8 @@ class Variable:
     """A named scalar of an exported model: an input, output or parameter.
 
     ``name`` must be a C identifier; ``start`` is the default value of a
-    parameter or an input (ignored for outputs). ``min`` and ``max`` bound the
+    parameter or an input, and for an output that of its ``<name>_start``
+    parameter, the initial output y0 (docs/fmu.md). ``min`` and ``max`` bound the
     valid values of an input, in its unit: the FMU declares them and warns
     when an input leaves them (see docs/fmu.md). None: unbounded on that side.
     """

@@ -11,6 +11,11 @@ Inside the FMU an input outside ``[min, max]`` makes ``doStep`` return a
 Warning (one log message per excursion) or, with the FMU parameter
 ``input_range_error = true``, an Error (docs/fmu.md). ``nnfmu evaluate``
 counts the test samples outside the range with :func:`count_outside`.
+
+Start values: a trained model's FMU declares neutral ones, the training means (the
+model's normalisation buffers ``u_mean`` and ``y_mean``), as each input's start and
+each ``<y>_start`` (:func:`stored_input_variables`, :func:`with_starts`); an input's
+start is then clipped into its range (docs/fmu.md, "Start values").
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from typing import Sequence
 
 import numpy as np
 
+from nnfmu.errors import ShapeError
 from nnfmu.system import Variable
 
 #: Fraction of the training range's width added below its minimum and above its maximum.
@@ -54,17 +60,35 @@ def with_ranges(variables: Sequence[Variable], ranges: Sequence[Range] | None) -
     return tuple(out)
 
 
+def with_starts(variables: Sequence[Variable], starts) -> tuple[Variable, ...]:
+    """``variables`` with ``start`` from ``starts`` (one finite value per variable, e.g. a model's
+    ``y_mean`` buffer, shape (n,)); None leaves them unchanged."""
+    if starts is None:
+        return tuple(variables)
+    values = [float(s) for s in np.asarray(_numbers(starts), dtype=float).ravel()]
+    if len(values) != len(variables) or not all(np.isfinite(values)):
+        raise ShapeError(f"expected {len(variables)} finite start values, got {values}; pass one per variable")
+    return tuple(dataclasses.replace(v, start=s) for v, s in zip(variables, values))
+
+
+def _numbers(values):
+    """A torch tensor (any device) or array-like as something numpy reads."""
+    return values.detach().cpu().numpy() if hasattr(values, "detach") else values
+
+
 def stored_input_variables(meta: dict, u_mean=None, u_std=None) -> tuple[Variable, ...]:
-    """A trained model's input Variables (from its ``meta``) with their valid range.
+    """A trained model's input Variables (from its ``meta``) with their valid range and start value.
 
     The range is ``meta["input_range"]``, stored at training time; a model saved before
-    ranges were stored gets :func:`normalisation_range` of ``u_mean`` and ``u_std``.
+    ranges were stored gets :func:`normalisation_range` of ``u_mean`` and ``u_std``. The start
+    value is ``u_mean`` (shape (n_u,), the training mean, physical units) clipped into the range.
     """
-    variables = tuple(Variable(**{k: ch[k] for k in ("name", "unit", "description") if k in ch})
-                      for ch in meta["inputs"])
+    variables = with_starts([Variable(**{k: ch[k] for k in ("name", "unit", "description") if k in ch})
+                             for ch in meta["inputs"]], u_mean)
     ranges = meta.get("input_range")
     if ranges is None and u_mean is not None:
-        ranges = normalisation_range(np.asarray(u_mean, dtype=float), np.asarray(u_std, dtype=float))
+        ranges = normalisation_range(np.asarray(_numbers(u_mean), dtype=float),
+                                     np.asarray(_numbers(u_std), dtype=float))
     return with_ranges(variables, ranges)
 
 

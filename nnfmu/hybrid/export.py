@@ -30,7 +30,7 @@ from nnfmu.export import casadi_nets as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
 from nnfmu.physics import rk4_step
 from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
-from nnfmu.valid_range import stored_input_variables
+from nnfmu.valid_range import stored_input_variables, with_starts
 
 _VERIFY_RTOL = 1e-9
 
@@ -120,7 +120,8 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
         name=_identifier(name or meta.get("name") or f"{model.physics.name}_hybrid"),
         Ts=model.Ts,
         inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the training range
-        outputs=tuple(Variable(ch["name"], ch.get("unit", ""), ch.get("description", "")) for ch in meta["outputs"]),
+        outputs=with_starts([Variable(ch["name"], ch.get("unit", ""), ch.get("description", ""))
+                             for ch in meta["outputs"]], model.y_mean),  # y0: the training mean
         parameters=model.physics_variables(),
         description=f"hybrid model exported by nnfmu: {model.physics.description} + neural correction "
                     f"({model.config.correction})",

@@ -278,7 +278,9 @@ def _identify(dataset: Dataset, config: LinearConfig, progress: bool) -> LinearM
             "order": order, "horizon": s, "singular_values": fit.singular_values.tolist(),
             "order_scores": {str(n): v for n, v in scores.items()}, "stabilised": stabilised,
             "scored_on": check_split, "nrmse_subspace": before, "config": dataclasses.asdict(config),
-            "dataset": dict(dataset.source)}
+            "dataset": dict(dataset.source),
+            "training_mean": {"u": np.asarray(st.u_mean, dtype=float).tolist(),  # the FMU's start values
+                              "y": np.asarray(st.y_mean, dtype=float).tolist()}}
     if config.refine:
         sys, info["refinement"] = _refine(sys, config, train, check, before, progress)
     info["nrmse_valid"] = free_run_nrmse(sys, config.init, *check)

@@ -28,7 +28,7 @@ from nnfmu.data import Channel
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, ShapeError
 from nnfmu.linear.statespace import INIT_OPTIONS, StateSpace, free_run, init_gains
 from nnfmu.system import CasadiModel, SystemSpec, Variable
-from nnfmu.valid_range import with_ranges
+from nnfmu.valid_range import with_ranges, with_starts
 
 FORMAT = "nnfmu-linear"
 
@@ -113,13 +113,17 @@ class LinearModel:
         return y
 
     def spec(self, name: str = "linear", description: str | None = None) -> SystemSpec:
-        """The :class:`SystemSpec` of the exported model: the dataset's channels and ``Ts``."""
+        """The :class:`SystemSpec` of the exported model: the dataset's channels and ``Ts``; start values
+        the training means (``info["training_mean"]``), an input's clipped into its range."""
         text = description or (f"linear state-space model, {self.n_x} states, init rule '{self.init}'")
         source = {"kind": "linear", "init": self.init, "order": self.n_x,
                   **{k: self.info[k] for k in ("nrmse_valid", "dataset") if k in self.info}}
-        inputs = with_ranges([Variable(c.name, c.unit, getattr(c, "description", "")) for c in self.inputs],
-                             self.input_range)
-        return SystemSpec(name=name, Ts=self.Ts, inputs=inputs, outputs=self.outputs,
+        mean = self.info.get("training_mean") or {}  # neutral start values (None: saved before they were stored)
+        inputs, outputs = ([Variable(c.name, c.unit, getattr(c, "description", "")) for c in channels]
+                           for channels in (self.inputs, self.outputs))
+        inputs = with_ranges(with_starts(inputs, mean.get("u")), self.input_range)
+        outputs = with_starts(outputs, mean.get("y"))
+        return SystemSpec(name=name, Ts=self.Ts, inputs=inputs, outputs=outputs,
                           description=text, source=source)
 
     def casadi_model(self, name: str = "linear", description: str | None = None) -> CasadiModel:

@@ -22,6 +22,7 @@ with the supply pilot fully open, p reaches 90 % of its final value in about
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -161,7 +162,9 @@ def valve_system(params: ValveParams | None = None) -> PhysicsSystem:
     init_state = ca.Function("valve_init_state", [y0, u, p], [x0], ["y0", "u0", "p"], ["x0"])
     return PhysicsSystem(
         name="valve", Ts=VALVE_TS, n_sub=4, ode=ode, output=output, init_state=init_state,
-        states=VALVE_STATES, inputs=_INPUTS, outputs=_OUTPUTS, parameters=variables,
+        # at rest: both pilots closed (0 V), the plunger on its seat, the chamber at ambient pressure
+        states=VALVE_STATES, inputs=_INPUTS, outputs=(_OUTPUTS[0], dataclasses.replace(_OUTPUTS[1], start=params.p_a)),
+        parameters=variables,
         state_scales=_STATE_SCALES,
         description="two-stage pneumatic valve (generic model, physics.md section 1), RK4",
         source={"model": "nnfmu.physics.valve", "params": params_to_json(params)},
