@@ -16,7 +16,7 @@ from nnfmu.errors import (
     ShapeError,
     UnknownOptionError,
 )
-from nnfmu.linear import LinearConfig, StateSpace, identify_linear, load_linear, refine
+from nnfmu.linear import EarlyStop, LinearConfig, StateSpace, identify_linear, load_linear, refine
 
 N_X, N_U, N_Y = 4, 2, 2
 OUT_SCALE, OUT_OFFSET = np.array([10.0, 0.01]), np.array([5.0, -2e-3])  # outputs of very different size
@@ -137,12 +137,70 @@ def test_refinement_that_hurts_validation_is_discarded(noisy_data):
     valid = noisy_data.valid
     made = [subspace.simulate(u, y[0]) for u, y in zip(valid.u, valid.y)]
     rigged = noisy_data.replace(splits={**noisy_data.splits, "valid": type(valid)(valid.u, tuple(made))})
-    model = identify_linear(rigged, order=3, max_evaluations=30)
+    model = identify_linear(rigged, order=3, max_evaluations=300)
     report = model.info["refinement"]
     assert report["cost_after"] < report["cost_before"]  # it did fit the training data better ...
     assert report["nrmse_after"] > model.info["nrmse_subspace"] and not report["accepted"]  # ... but not valid
     assert model.info["nrmse_valid"] == model.info["nrmse_subspace"] < 1e-12
     np.testing.assert_array_equal(model.system.A, subspace.system.A)
+    assert report["best_evaluation"] == 0 and "no evaluation scored better than the start" in report["message"]
+
+
+def test_identification_stops_the_refinement_on_the_validation_nrmse(noisy_data, monkeypatch):
+    """identify_linear scores the validation free-run NRMSE every max_evaluations // 100 evaluations and
+    stops after refine_patience checks without a better one (the tanks of docs/tutorial.md: 100
+    evaluations instead of 1000)."""
+    import nnfmu.linear.identify as identify
+
+    seen, real_refine = [], identify.refine
+
+    def spy(start, *args, **kwargs):
+        seen.append((start, kwargs["early_stop"]))
+        return real_refine(start, *args, **kwargs)
+
+    monkeypatch.setattr(identify, "refine", spy)
+    model = identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=4)
+    start, stop = seen[0]
+    assert (stop.every, stop.patience) == (3, 4)
+    assert stop.score(start) == model.info["nrmse_subspace"]  # the score is the validation free-run NRMSE
+    assert model.info["nrmse_valid"] == model.info["refinement"]["nrmse_after"] <= model.info["nrmse_subspace"]
+    identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=None)
+    assert seen[1][1] is None  # None: no early stop, the run goes to convergence or the limit
+    with pytest.raises(ConfigError, match="refine_patience must be a positive integer"):
+        LinearConfig(refine_patience=0)
+
+
+def _perturbed_problem(seed: int = 8):
+    """Normalised trajectories of a known system and a start 2 % off it."""
+    rng = np.random.default_rng(seed)
+    sys = StateSpace(true_system().A, rng.normal(size=(N_X, N_U)), np.zeros(N_X), rng.normal(size=(N_Y, N_X)),
+                     np.zeros(N_Y))
+    us = [rng.normal(size=(n, N_U)) for n in (80, 120)]
+    ys = [run(sys, u, x0=np.zeros(N_X)) for u in us]
+    return sys.replace(A=sys.A + 0.02 * rng.normal(size=(N_X, N_X)), B=sys.B * 1.05), us, ys
+
+
+@pytest.mark.parametrize("method", ["quasi-newton", "gauss-newton"])
+def test_early_stop_ends_the_refinement_and_returns_the_best_scored_system(method):
+    start, us, ys = _perturbed_problem()
+    flat = EarlyStop(lambda system: 1.0, every=2, patience=3)  # a validation score that never improves
+    result = refine(start, us, ys, init="zero-offset", max_radius=0.9999, max_evaluations=500, method=method,
+                    early_stop=flat)
+    assert result.evaluations == 6 and result.best_evaluation == 0 and result.system is start
+    assert result.score_before == result.score_after == 1.0 and result.cost_after == result.cost_before
+    scored = []
+
+    def training_error(system):  # improves with every step: the refinement runs to convergence as without
+        scored.append(system)
+        return refine(system, us, ys, init="zero-offset", max_radius=0.9999, max_evaluations=1).cost_before
+
+    result = refine(start, us, ys, init="zero-offset", max_radius=0.9999, max_evaluations=500, method=method,
+                    early_stop=EarlyStop(training_error, every=2, patience=3))
+    assert result.cost_after < 1e-10 * result.cost_before and 0 < result.best_evaluation <= result.evaluations < 500
+    assert result.score_after == pytest.approx(result.cost_after, rel=1e-6)
+    assert len(scored) < result.evaluations  # scored every second evaluation at most, not at every one
+    with pytest.raises(ConfigError, match="EarlyStop.every must be a positive integer"):
+        EarlyStop(lambda system: 1.0, every=0)
 
 
 @pytest.mark.parametrize("x0", ["rule", "fit"])

@@ -8,7 +8,7 @@ dataset's units; ``model.casadi_model()`` is the ``(init, step)`` pair that
 
 from nnfmu.linear.identify import LinearConfig, identify_linear
 from nnfmu.linear.model import LinearModel, load_linear
-from nnfmu.linear.refine import X0_OPTIONS, RefineResult, refine
+from nnfmu.linear.refine import X0_OPTIONS, EarlyStop, RefineResult, refine
 from nnfmu.linear.statespace import (
     INIT_OPTIONS,
     StateSpace,
@@ -21,6 +21,7 @@ from nnfmu.linear.subspace import SubspaceFit, fit_subspace, realise
 __all__ = [
     "INIT_OPTIONS",
     "X0_OPTIONS",
+    "EarlyStop",
     "LinearConfig",
     "LinearModel",
     "RefineResult",

@@ -132,7 +132,7 @@ def minimise_output_error(problem, max_evaluations: int):
             problem._count(np.inf)
             return np.inf, None
         run = error.run(sys, problem._fitted_x0(sys) if problem.fit_x0 else problem._rule_x0(sys))
-        problem._count(run.cost)
+        problem._count(run.cost, sys)
         return run.cost, (sys, run)
 
     def gradient(beta, state):

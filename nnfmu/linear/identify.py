@@ -15,8 +15,12 @@ Steps of :func:`identify_linear`:
 4. Stability. Eigenvalues of ``A`` beyond ``0.999 * max_spectral_radius`` are
    pulled onto that circle and ``B, b`` refitted.
 5. Refinement (optional, :mod:`nnfmu.linear.refine`): output-error least squares on
-   the free runs of the training split; kept only if the validation NRMSE does
-   not get worse, so refinement never makes the validation error worse.
+   the free runs of the training split, stopped early when the validation NRMSE stops
+   improving: it is checked every ``max_evaluations // 100`` evaluations (at least 1), and
+   after ``refine_patience`` checks in a row without a better one the refinement ends and
+   the best model seen is kept (the subspace model if none was better), so refinement
+   never makes the validation error worse. ``refine_patience=None``: run to the limit, and
+   keep the end point only if its validation NRMSE is no worse than the subspace model's.
 6. The scaling is folded back: :class:`~nnfmu.linear.LinearModel` works in physical units.
 
 Every step runs with ``threads`` BLAS threads (default 1, through threadpoolctl). The
@@ -39,7 +43,7 @@ from tqdm.auto import tqdm
 from nnfmu.data import Dataset, Trajectories
 from nnfmu.errors import ConfigError, ShapeError, check_options
 from nnfmu.linear.model import LinearModel
-from nnfmu.linear.refine import METHODS, X0_OPTIONS, refine
+from nnfmu.linear.refine import METHODS, X0_OPTIONS, EarlyStop, refine
 from nnfmu.linear.statespace import (
     INIT_OPTIONS,
     StateSpace,
@@ -78,6 +82,9 @@ class LinearConfig:
         Cost evaluations allowed to the refinement; ``None``: 1000 for ``quasi-newton``, 100 for
         ``gauss-newton`` (about the same CPU time on the robot, where an evaluation costs 0.04 s
         or 3 s).
+    refine_patience : int or None
+        Validation checks in a row without improvement after which the refinement stops (step 5);
+        None: no early stop.
     max_spectral_radius : float
         No refined ``A`` reaches this spectral radius (in (0, 1]).
     order_tolerance : float
@@ -95,6 +102,7 @@ class LinearConfig:
     refine_x0: str = "rule"
     refine_method: str = "quasi-newton"
     max_evaluations: int | None = None
+    refine_patience: int | None = 10
     max_spectral_radius: float = 0.9999
     order_tolerance: float = 0.02
     threads: int = 1
@@ -103,7 +111,7 @@ class LinearConfig:
         for name, allowed in (("init", INIT_OPTIONS), ("refine_x0", X0_OPTIONS), ("refine_method", METHODS)):
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
-        for name in ("order", "max_order", "horizon", "max_evaluations", "threads"):
+        for name in ("order", "max_order", "horizon", "max_evaluations", "refine_patience", "threads"):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, (int, np.integer)) or value < 1):
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
@@ -220,15 +228,26 @@ def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float,
         bar.update(evaluations - bar.n)
         bar.set_postfix(cost=f"{cost:.6g}", best=f"{best:.6g}")
 
+    early_stop = None if config.refine_patience is None else EarlyStop(
+        lambda candidate: free_run_nrmse(candidate, config.init, *check),
+        every=max(1, config.evaluations // 100), patience=config.refine_patience)
     with bar:
         result = refine(sys, *train, init=config.init, x0=config.refine_x0, max_radius=config.max_spectral_radius,
-                        max_evaluations=config.evaluations, method=config.refine_method, report=show)
-        bar.total = bar.n  # converged before the limit: the bar ends full
-    after = free_run_nrmse(result.system, config.init, *check)
-    accepted = after <= before
+                        max_evaluations=config.evaluations, method=config.refine_method, report=show,
+                        early_stop=early_stop)
+        bar.total = bar.n  # stopped or converged before the limit: the bar ends full
     report = {"x0": config.refine_x0, "method": config.refine_method, "evaluations": result.evaluations,
-              "message": result.message, "cost_before": result.cost_before, "cost_after": result.cost_after,
-              "nrmse_after": after, "accepted": bool(accepted)}
+              "message": result.message, "cost_before": result.cost_before, "cost_after": result.cost_after}
+    if early_stop is None:
+        after = free_run_nrmse(result.system, config.init, *check)
+        accepted = after <= before
+    else:  # the best model seen; when that is the start, the last one checked says how far refining got
+        accepted = bool(result.best_evaluation)
+        after = result.score_after
+        if not accepted and result.score_last is not None:
+            after, report["cost_after"] = result.score_last, result.cost_last
+        report["best_evaluation"] = result.best_evaluation
+    report.update(nrmse_after=after, accepted=bool(accepted))
     return (result.system if accepted else sys), report
 
 

@@ -34,6 +34,13 @@ the data therefore accumulates only ``J^T J``, ``J^T r`` and ``r^T r``, and
 ``J_c^T J_c = J^T J``, ``J_c^T r_c = J^T r`` and ``|r_c| = |r|``. Its cost, gradient
 and Gauss-Newton model are those of the full problem, so it takes the same steps.
 
+Early stop on validation (``early_stop``, what :func:`nnfmu.linear.identify_linear` does). A
+lower training cost is not a better model: on short or noisy records the free-run fit goes on
+lowering the training cost while the validation error rises. With an :class:`EarlyStop`, the
+system with the lowest training cost so far is scored on validation every ``every``
+evaluations; the refinement stops once ``patience`` checks in a row found no better score, and
+returns the best-scoring system seen (the start included, so it never returns a worse one).
+
 Stability. The residual function returns a fixed penalty (ten times the
 starting residual norm) for any ``A`` whose spectral radius reaches
 ``max_radius``; the trust region rejects that step and shrinks, so every
@@ -62,13 +69,80 @@ _CHUNK_SIZE = 2_000_000  # sensitivity values held per time chunk (16 MB)
 
 @dataclass(frozen=True)
 class RefineResult:
-    """The refined system, the cost (half the sum of squared residuals) before and after, and evaluations."""
+    """The refined system, the cost (half the sum of squared residuals) before and after, and evaluations.
+
+    With an :class:`EarlyStop`, ``score_before`` and ``score_after`` are the validation scores of the
+    start and of the returned system, ``best_evaluation`` the evaluation that found it (0: the start)
+    and ``score_last``, ``cost_last`` the score and cost of the last system checked (None: none was).
+    """
 
     system: StateSpace
     cost_before: float
     cost_after: float
     evaluations: int
     message: str
+    score_before: float | None = None
+    score_after: float | None = None
+    best_evaluation: int | None = None
+    score_last: float | None = None
+    cost_last: float | None = None
+
+
+@dataclass(frozen=True)
+class EarlyStop:
+    """Stop the refinement when the validation score stops improving (module docstring).
+
+    Attributes
+    ----------
+    score : callable ``score(system) -> float``
+        Validation error of a normalised :class:`StateSpace` (lower is better), e.g. its free-run NRMSE.
+    every : int
+        Evaluations between two checks.
+    patience : int
+        Checks in a row without a better score after which the refinement stops.
+    """
+
+    score: Callable[[StateSpace], float]
+    every: int = 10
+    patience: int = 10
+
+    def __post_init__(self) -> None:
+        for name in ("every", "patience"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ConfigError(f"EarlyStop.{name} must be a positive integer, got {value!r}")
+
+
+class _Stopped(Exception):
+    """Raised inside the minimiser's cost function when validation has stopped improving."""
+
+
+class _Monitor:
+    """Keeps the system of lowest training cost, scores it every ``every`` evaluations, keeps the best score."""
+
+    def __init__(self, rule: EarlyStop, start: StateSpace, cost0: float):
+        self.rule, self.candidate, self.scored = rule, None, True
+        self.best = (float(rule.score(start)), start, cost0, 0)  # (score, system, cost, evaluation)
+        self.score0, self.train_best, self.stale, self.last = self.best[0], cost0, 0, None
+
+    def seen(self, evaluation: int, cost: float, sys: StateSpace | None) -> None:
+        if sys is not None and cost < self.train_best:
+            self.train_best, self.candidate, self.scored = cost, (sys, cost, evaluation), False
+        if evaluation % self.rule.every == 0:
+            self.check()
+            if self.stale >= self.rule.patience:
+                raise _Stopped
+
+    def check(self) -> None:
+        """Score the candidate (if new): a better score resets the patience, otherwise it runs down."""
+        if self.candidate is not None and not self.scored:
+            self.scored = True
+            score = float(self.rule.score(self.candidate[0]))
+            self.last = (score, self.candidate[1])
+            if score < self.best[0]:
+                self.best, self.stale = (score, *self.candidate), 0
+                return
+        self.stale += 1
 
 
 def _directions(sys: StateSpace, with_b: bool) -> np.ndarray:
@@ -105,7 +179,7 @@ class _Problem:
 
     def __init__(self, sys: StateSpace, us, ys, init: str, x0: str, max_radius: float, report=None):
         self.start, self.init, self.fit_x0, self.max_radius = sys, init, x0 == "fit", max_radius
-        self.report, self.evaluations, self.best = report, 0, np.inf
+        self.report, self.evaluations, self.best, self.monitor = report, 0, np.inf, None
         self.with_b = init == "estimate"
         n, n_u, n_y = sys.n_x, sys.B.shape[1], sys.C.shape[0]
         self.shapes = [(n, n), (n, n_u), (n_y, n)]
@@ -152,16 +226,19 @@ class _Problem:
                 if self.penalty is not None and not np.isfinite(out[0]).all():
                     out = (self.penalty, np.zeros((self.n_dir + 1, self.n_dir)))
             self.cache = (key, *out)
-            self._count(0.5 * float(out[0] @ out[0]))
+            self._count(0.5 * float(out[0] @ out[0]), sys)
         return self.cache[1], self.cache[2]
 
-    def _count(self, cost: float) -> None:
+    def _count(self, cost: float, sys: StateSpace | None = None) -> None:
+        """Count one evaluation of ``sys`` (None: not kept) at ``cost``; may raise _Stopped (early stop)."""
         if self.penalty is None:  # the starting point, evaluated in __init__, is not an evaluation of the fit
             return
         self.evaluations += 1
         self.best = min(self.best, cost)
         if self.report is not None:
             self.report(self.evaluations, cost, self.best)
+        if self.monitor is not None:
+            self.monitor.seen(self.evaluations, cost, sys)
 
     def _rule_x0(self, sys: StateSpace) -> np.ndarray:
         if self.init == "zero-offset":
@@ -266,7 +343,8 @@ def _observability(sys: StateSpace, n_steps: int) -> np.ndarray:
 
 
 def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: float, max_evaluations: int,
-           method: str = "quasi-newton", report: Callable[[int, float, float], None] | None = None) -> RefineResult:
+           method: str = "quasi-newton", report: Callable[[int, float, float], None] | None = None,
+           early_stop: EarlyStop | None = None) -> RefineResult:
     """Fit ``sys`` to normalised trajectories by free-run output error.
 
     Parameters
@@ -287,6 +365,9 @@ def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: 
         The minimiser (module docstring).
     report : callable, optional
         ``report(evaluations, cost, best_cost)`` after every evaluation (progress display).
+    early_stop : EarlyStop, optional
+        Score on validation while refining, stop when the score stops improving, and return the
+        best-scoring system (module docstring). None: run to convergence or ``max_evaluations``.
     """
     if not sys.spectral_radius < max_radius:
         raise ConfigError(f"refinement must start from a stable system, got spectral radius {sys.spectral_radius:.6g} "
@@ -297,16 +378,48 @@ def refine(sys: StateSpace, us, ys, *, init: str, x0: str = "rule", max_radius: 
     problem = _Problem(sys, us, ys, init, x0, max_radius, report)
     if problem.n_dir == 0:
         return RefineResult(sys, problem.cost0, problem.cost0, 0, "nothing to refine")
-    if method == "quasi-newton":
-        found = minimise_output_error(problem, max_evaluations)
-        beta, cost, evaluations, message = found.x, found.cost, found.evaluations, found.message
-    else:
-        result = scipy.optimize.least_squares(problem.residuals, np.zeros(problem.n_dir), jac=problem.jacobian,
-                                              method="trf", x_scale="jac", max_nfev=max_evaluations)
-        beta, cost, evaluations, message = result.x, float(result.cost), int(result.nfev), result.message
+    if early_stop is not None:
+        problem.monitor = _Monitor(early_stop, sys, problem.cost0)
+    try:
+        if method == "quasi-newton":
+            found = minimise_output_error(problem, max_evaluations)
+            beta, cost, evaluations, message = found.x, found.cost, found.evaluations, found.message
+        else:
+            result = scipy.optimize.least_squares(problem.residuals, np.zeros(problem.n_dir), jac=problem.jacobian,
+                                                  method="trf", x_scale="jac", max_nfev=max_evaluations)
+            beta, cost, evaluations, message = result.x, float(result.cost), int(result.nfev), result.message
+    except _Stopped:
+        return _best_scored(problem, None)
+    if problem.monitor is not None:
+        return _best_scored(problem, (beta, cost, message))
     refined = problem.system(beta)
     if not refined.spectral_radius < max_radius or cost > problem.cost0:
         return RefineResult(sys, problem.cost0, problem.cost0, evaluations, f"rejected ({message})")
-    if refined.spectral_radius > max_radius - 1e-4 * max_radius:
-        message += " Stopped at the spectral-radius limit: the fit pulls towards an unstable model."
-    return RefineResult(refined, problem.cost0, cost, evaluations, message)
+    return RefineResult(refined, problem.cost0, cost, evaluations, message + _at_limit(refined, max_radius))
+
+
+def _at_limit(system: StateSpace, max_radius: float) -> str:
+    """The note that tells the user why a fit ended at the stability limit (empty if it did not)."""
+    if system.spectral_radius > max_radius - 1e-4 * max_radius:
+        return " Stopped at the spectral-radius limit: the fit pulls towards an unstable model."
+    return ""
+
+
+def _best_scored(problem: _Problem, end: tuple | None) -> RefineResult:
+    """The early-stopped result: the best-scoring system seen. ``end``: ``(beta, cost, message)`` where the
+    minimiser ended by itself (its end point is a candidate too), None where validation stopped it."""
+    monitor, n = problem.monitor, problem.evaluations
+    if end is not None:
+        beta, cost, why = end
+        system = problem.system(beta)
+        if cost < monitor.train_best and system.spectral_radius < problem.max_radius:
+            monitor.candidate, monitor.scored = (system, cost, n), False
+        monitor.check()
+    else:
+        why = (f"stopped: the validation score did not improve in {monitor.rule.patience} checks "
+               f"({monitor.rule.patience * monitor.rule.every} evaluations)")
+    score, system, cost, at = monitor.best
+    found = f"best validation score at evaluation {at}" if at else "no evaluation scored better than the start"
+    message = f"{why}; {found}." + _at_limit(system, problem.max_radius)
+    return RefineResult(system, problem.cost0, cost, n, message, monitor.score0, score, at,
+                        *(monitor.last or (None, None)))
