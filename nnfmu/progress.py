@@ -2,23 +2,79 @@
 
 ``tqdm.auto`` picks the widget bar inside Jupyter, but without ``ipywidgets``
 it warns "IProgress not found" and draws nothing useful; :func:`tqdm` then
-takes the text bar instead, which prints fine in a notebook too.
+takes the text bar instead, which prints fine in a notebook too. Written to a log
+file or a pipe, the text bar prints a line every few seconds (:data:`LOG_INTERVAL_S`),
+not one per update.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import sys
 import time
 
 from nnfmu.limits import UNBOUNDED_EPOCHS
 
 
+#: On a stream that is not a terminal (a log file, a pipe), a bar prints at most one line per this many seconds.
+LOG_INTERVAL_S = 5.0
+_clock = time.monotonic  # replaced in tests
+
+
+class _LogLines:
+    """A text stream for a bar that is not drawn on a terminal: whole lines, at most one per ``interval`` s.
+
+    tqdm redraws a bar by writing ``\\r`` and the new text, and on a terminal the line is
+    overwritten; in a log file each redraw stays, and a bar that refreshes on every
+    ``set_postfix`` leaves one line per update. Here a redraw is held back until ``interval`` s
+    have passed since the last line, and the bar's last state is written when it closes.
+    """
+
+    def __init__(self, stream, interval: float):
+        self.stream, self.interval, self.last, self.pending = stream, interval, None, None
+
+    def write(self, text: str) -> None:
+        for piece in text.split("\r"):
+            line = piece.rstrip()
+            if line:
+                self.pending = line
+                now = _clock()
+                if self.last is None or now - self.last >= self.interval:
+                    self._emit(now)
+            if piece.endswith("\n"):  # the bar closes: its last state is its result
+                self._emit(_clock())
+
+    def _emit(self, now: float) -> None:
+        if self.pending is not None:
+            self.stream.write(self.pending + "\n")
+            self.stream.flush()
+            self.pending, self.last = None, now
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+def _in_notebook() -> bool:
+    return "ipykernel" in sys.modules  # its output area overwrites a line on a carriage return, like a terminal
+
+
 def tqdm(*args, **kwargs):
-    """A tqdm bar: the notebook widget if ipywidgets is installed (tqdm.auto), else the text bar."""
-    if importlib.util.find_spec("ipywidgets") is not None:
+    """A tqdm bar: the notebook widget if ipywidgets is installed (tqdm.auto), else the text bar.
+
+    On a stream that is not a terminal, outside a notebook, the text bar prints a line at most
+    every :data:`LOG_INTERVAL_S` seconds, and its final state when it closes.
+    """
+    if importlib.util.find_spec("ipywidgets") is not None and _in_notebook():
         from tqdm.auto import tqdm as bar
-    else:
-        from tqdm import tqdm as bar
+
+        return bar(*args, **kwargs)
+    from tqdm import tqdm as bar
+
+    stream = kwargs.get("file") or sys.stderr
+    drawn = kwargs.get("disable", False) is False  # disable=None: tqdm's own "off where not a terminal"
+    if drawn and not _in_notebook() and not getattr(stream, "isatty", lambda: False)():
+        kwargs.update(file=_LogLines(stream, LOG_INTERVAL_S), dynamic_ncols=False,  # no width to fit: no cut
+                      mininterval=max(kwargs.get("mininterval", 0.1), LOG_INTERVAL_S))
     return bar(*args, **kwargs)
 
 

@@ -81,6 +81,9 @@ def _run(args: argparse.Namespace) -> int:
                           refine_method=args.refine_method, max_evaluations=args.max_evaluations,
                           threads=args.threads)
     dataset = load_dataset(args.data)
+    print(f"linear: identifying on {args.data}: " + (f"order {args.order}" if args.order else
+          f"orders up to {args.max_order}") + ("" if args.no_refine else f", then up to {config.evaluations} "
+          "refinement evaluations (may take minutes)"), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
     if args.out:  # first: a failing -o then leaves no file at all

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
-from tqdm.auto import tqdm
+from nnfmu.progress import tqdm  # a line every few seconds in a log file, not one per evaluation
 
 from nnfmu.data import Dataset, Trajectories
 from nnfmu.errors import ConfigError, ShapeError, check_options
