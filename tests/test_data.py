@@ -80,7 +80,7 @@ def test_nan_in_file_names_file_array_and_position(tmp_path):
         arrays = dict(z)
     arrays["y"][1, 3, 0] = np.nan
     np.savez(tmp_path / "d" / "train.npz", **arrays)
-    with pytest.raises(DataError, match=r"train\.npz: train trajectory 1: array 'y' .*non-finite.*step 3"):
+    with pytest.raises(DataError, match=r"train\.npz: train trajectory 1: array 'y' .*non-finite.*step 3, channel 0, 0-based"):
         load_dataset(tmp_path / "d")
 
 

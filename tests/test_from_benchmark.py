@@ -66,7 +66,7 @@ def test_refusals_say_what_to_give():
     with pytest.raises(DataError, match="no test data"):
         nnfmu.from_benchmark(train)
     odd = Input_output_data(*_tank(50, 3), sampling_time=1.0)
-    with pytest.raises(DataError, match="different sampling times"):
+    with pytest.raises(DataError, match="sample times differ by more than 0.0001"):
         nnfmu.from_benchmark(train, odd)
     discrete = Input_output_data(*_tank(50, 3))
     with pytest.raises(DataError, match="discrete-time .* give Ts"):
@@ -105,3 +105,25 @@ def test_cli_imports_a_named_benchmark(tmp_path, monkeypatch, capsys):
     assert "init window: the first 50 samples" in capsys.readouterr().out
     assert main(["import", "nonlinear-benchmark", "Tanks", "-o", str(tmp_path / "e")]) == 2
     assert "unknown benchmark 'Tanks'; choose one of Cascaded_Tanks" in capsys.readouterr().err
+
+
+def test_cli_names_the_channels_takes_ts_and_records_that_agree_to_1e_4(tmp_path, monkeypatch, capsys):
+    from nnfmu.cli import main
+
+    def fake(dir_placement=None, **kwargs):  # like EMPS: the records' sampling times differ by 0.0024 %
+        train, test = _benchmark_pair()
+        test.sampling_time = TS * (1 + 2.4e-5)
+        return train, test
+
+    monkeypatch.setattr(nonlinear_benchmarks, "Silverbox", fake)
+    assert main(["import", "nonlinear-benchmark", "Silverbox", "-o", str(tmp_path / "d")]) == 0
+    ds = load_dataset(tmp_path / "d")
+    assert ds.input_names == ["u1"] and ds.output_names == ["y1"] and ds.Ts == TS  # the training records' Ts
+    assert main(["import", "nonlinear-benchmark", "Silverbox", "--inputs", "u", "--outputs", "y", "--Ts", "2",
+                 "-o", str(tmp_path / "e")]) == 0
+    ds = load_dataset(tmp_path / "e")
+    assert ds.input_names == ["u"] and ds.output_names == ["y"] and ds.Ts == 2.0 and ds.source["name"] == "e"
+    assert main(["import", "nonlinear-benchmark", "Silverbox", "--inputs", "u=3", "-o", str(tmp_path / "f")]) == 2
+    assert "--inputs: for nonlinear-benchmark it names the channels" in capsys.readouterr().err
+    assert main(["import", "robot-benchmark", "r.mat", "--Ts", "2", "-o", str(tmp_path / "f")]) == 2
+    assert "robot-benchmark takes one FILE and none of --Ts" in capsys.readouterr().err

@@ -105,5 +105,5 @@ def test_csv_loader(tmp_path):
     with pytest.raises(DataError, match=r"has no column 'torque'; its columns are: time, volt, speed"):
         load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["torque"], outputs=["speed"],
                  Ts=0.5)
-    with pytest.raises(DataError, match="give either the sample time Ts"):
+    with pytest.raises(DataError, match="give the sample time one way"):
         load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["volt"], outputs=["speed"])

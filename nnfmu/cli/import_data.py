@@ -7,6 +7,7 @@ failed import writes nothing.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 FORMATS = ("csv", "mat", "npz", "robot-benchmark", "nonlinear-benchmark")
 
@@ -22,8 +23,12 @@ _DESCRIPTION = (
 )
 
 _EPILOG = (
-    "Example, one CSV with the columns uEst, uVal, yEst, yVal sampled every 4 s: nnfmu import csv tanks.csv "
-    "--inputs u=uEst --outputs y=yEst --test-columns u=uVal,y=yVal --units u=V,y=V --Ts 4 -o data/tanks"
+    "Examples. One CSV with the columns uEst, uVal, yEst, yVal sampled every 4 s: nnfmu import csv tanks.csv "
+    "--inputs u=uEst --outputs y=yEst --test-columns u=uVal,y=yVal --units u=V,y=V --Ts 4 -o data/tanks. "
+    "The F-16 benchmark's CSVs as distributed (trailing commas, the rate Fs in the first row only): nnfmu import "
+    "csv F16Data_FullMSine_Level5.csv --inputs Force --outputs Acceleration1 Acceleration2 Acceleration3 "
+    "--fs-column Fs --test F16Data_FullMSine_Level6_Validation.csv -o data/f16. Positions in messages are 0-based. "
+    "The dataset (and the models trained on it) is named after the -o folder."
 )
 
 
@@ -37,14 +42,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--out", required=True, help="dataset folder to write")
     p.add_argument("--force", action="store_true", help="replace an existing dataset folder")
     cols = p.add_argument_group("columns (csv, mat, npz)")
-    cols.add_argument("--inputs", metavar="COLS", help="input columns, comma-separated: names, 0-based indices, or "
-                      "NAME=COLUMN to name the channel (a .mat/.npz matrix gives all its columns)")
-    cols.add_argument("--outputs", metavar="COLS", help="output columns, in the same form as --inputs")
+    cols.add_argument("--inputs", metavar="COLS", nargs="+", help="input columns, separated by commas or spaces: "
+                      "names, 0-based indices, or NAME=COLUMN to name the channel (a .mat/.npz matrix gives all its "
+                      "columns); nonlinear-benchmark: the channel names (default u1, u2, ...)")
+    cols.add_argument("--outputs", metavar="COLS", nargs="+", help="output columns, in the same form as --inputs; "
+                      "nonlinear-benchmark: the channel names (default y1, y2, ...)")
     cols.add_argument("--units", metavar="UNITS", help="units, comma-separated: one per channel (inputs first) or "
                       "NAME=UNIT, e.g. u=V,y=m")
     timing = cols.add_mutually_exclusive_group()
-    timing.add_argument("--Ts", type=float, metavar="SECONDS", help="the sample time in seconds")
-    timing.add_argument("--time", metavar="COL", help="the column holding time in seconds (Ts is its median step)")
+    timing.add_argument("--Ts", type=float, metavar="SECONDS", help="the sample time in seconds; forces one Ts on "
+                        "files (or nonlinear-benchmark records) whose sample times disagree")
+    timing.add_argument("--time", metavar="COL", help="the column holding time in seconds (Ts is its median step, "
+                        "rounded to the decimals the time stamps carry)")
+    timing.add_argument("--Ts-column", metavar="COL", help="a column holding the sample time in seconds, filled in "
+                        "one or more rows (the others empty), or a single number of a .mat/.npz file")
+    timing.add_argument("--fs-column", metavar="COL", help="the same for the sample rate in Hz, e.g. the F-16 "
+                        "benchmark's Fs, given in the first data row only")
     cols.add_argument("--resample", type=int, default=1, metavar="Q",
                       help="keep every Q-th sample after an anti-aliasing low-pass filter (zero-phase FIR, cut off "
                            "at the new Nyquist frequency); Ts becomes Q times the files' (default 1)")
@@ -105,7 +118,8 @@ def _tabular(args: argparse.Namespace):
             columns[split] = given
     return load_files(files, inputs=_entries(args.inputs, "--inputs"), outputs=_entries(args.outputs, "--outputs"),
                       columns=columns, units=parse_items(args.units, "--units"), Ts=args.Ts,
-                      time_column=args.time, resample=args.resample, valid_fraction=args.valid_fraction,
+                      time_column=args.time, Ts_column=args.Ts_column, fs_column=args.fs_column,
+                      resample=args.resample, valid_fraction=args.valid_fraction,
                       valid_trajectories=args.valid_trajectories, seed=args.seed, fmt=args.format)
 
 
@@ -114,31 +128,54 @@ def _single(args: argparse.Namespace):
     from nnfmu.data.benchmarks import fetch_benchmark
     from nnfmu.errors import ConfigError
 
-    tabular_only = [f"--{k.replace('_', '-')}" for k in ("inputs", "outputs", "time", "test", "valid",
-                                                          "test_columns", "valid_columns", "Ts")
-                    if getattr(args, k) is not None] + (["--resample"] if args.resample != 1 else [])
+    named = ("inputs", "outputs", "Ts") if args.format == "nonlinear-benchmark" else ()
+    tabular_only = [f"--{k.replace('_', '-')}" for k in ("inputs", "outputs", "time", "Ts_column", "fs_column", "test",
+                                                          "valid", "test_columns", "valid_columns", "Ts")
+                    if getattr(args, k) is not None and k not in named] + (["--resample"] if args.resample != 1 else [])
     if len(args.files) != 1 or tabular_only:
         raise ConfigError(f"{args.format} takes one FILE and none of {', '.join(tabular_only) or 'the column options'}"
                           f"; got {len(args.files)} file(s)")
     if args.format == "robot-benchmark":
         ds = load_robot_benchmark(args.files[0])
     else:
-        ds = fetch_benchmark(args.files[0], data_dir=args.data_dir)
+        names = {k: _channel_names(getattr(args, k), f"--{k}") for k in ("inputs", "outputs")}
+        ds = fetch_benchmark(args.files[0], data_dir=args.data_dir, Ts=args.Ts, **names)
     ds = ds.with_units(parse_items(args.units, "--units"))
     if args.valid_fraction is not None or args.valid_trajectories is not None:
         ds = ds.with_validation(args.valid_fraction, seed=args.seed, n_traj=args.valid_trajectories)
     return ds
 
 
-def _run(args: argparse.Namespace) -> int:
-    from pathlib import Path
+def _channel_names(text: str | None, flag: str) -> list[str]:
+    """nonlinear-benchmark: ``--inputs u`` names the channels (default u1, u2, ... and y1, y2, ...)."""
+    from nnfmu.errors import ConfigError
 
+    names = [t.strip() for t in (text or "").split(",") if t.strip()]
+    bad = [n for n in names if not n.isidentifier()]
+    if bad:
+        raise ConfigError(f"{flag}: for nonlinear-benchmark it names the channels, one identifier per channel "
+                          f"(e.g. {flag} u), got {bad}")
+    return names
+
+
+def _named_after(ds, out: str):
+    """The dataset named after its folder: models trained on it are called ``<folder>_<arch>``."""
+    import re
+
+    name = re.sub(r"\W+", "_", Path(out).resolve().name).strip("_") or "data"
+    return ds.replace(source={**ds.source, "name": f"d_{name}" if name[0].isdigit() else name})
+
+
+def _run(args: argparse.Namespace) -> int:
     from nnfmu.data import save_dataset
     from nnfmu.errors import DataFileError
 
     if Path(args.out).exists() and not args.force:  # before reading what may be large files
         raise DataFileError(f"{args.out} already exists; choose another folder or pass --force")
-    ds = _tabular(args) if args.format in ("csv", "mat", "npz") else _single(args)
+    for key in ("inputs", "outputs"):  # "--outputs a b c" and "--outputs a,b,c" are the same
+        if getattr(args, key) is not None:
+            setattr(args, key, ",".join(getattr(args, key)))
+    ds = _named_after(_tabular(args) if args.format in ("csv", "mat", "npz") else _single(args), args.out)
     save_dataset(ds, args.out, overwrite=args.force)
     print(f"wrote {args.out}")
     print(ds.summary())

@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from nnfmu.data.dataset import Dataset, from_arrays
+from nnfmu.data.sampling import common_sample_time
 from nnfmu.errors import DataError, DataFileError
 
 
@@ -39,16 +40,18 @@ def _column(a, where: str) -> np.ndarray:
     return a
 
 
-def _sample_time(records: list, Ts: float | None) -> float:
-    times = {float(r.sampling_time) for r in records if r.sampling_time is not None}
+def _sample_time(splits: dict, Ts: float | None) -> float:
+    """``Ts`` if given, else the training records' ``sampling_time`` (all records must agree to 1e-4, relative)."""
     if Ts is not None:
+        if not (np.isfinite(Ts) and Ts > 0):
+            raise DataError(f"Ts (CLI --Ts) must be a positive number of seconds, got {Ts!r}")
         return float(Ts)
+    times = {f"{s} record {i}": float(r.sampling_time) for s, recs in splits.items() for i, r in enumerate(recs)
+             if r.sampling_time is not None}
     if not times:
         raise DataError("the data are discrete-time (no sampling_time); give Ts in s")
-    if max(times) - min(times) > 1e-9 * max(times):
-        raise DataError(f"the records have different sampling times {sorted(times)} s; give them one Ts "
-                        "(resample first) or pass Ts")
-    return times.pop()
+    train = [k for k in times if k.startswith("train ")] or list(times)
+    return common_sample_time(times, train, "give Ts (CLI: --Ts) to force one")
 
 
 def _init_window(records: list) -> int | None:
@@ -76,8 +79,10 @@ def from_benchmark(
         pair a benchmark function returns: ``from_benchmark(nonlinear_benchmarks.Cascaded_Tanks())``.
     test, valid : Input_output_data or a list of them (each record is one trajectory).
     inputs, outputs : channel names, :class:`Channel` objects or ``{"name", "unit"}`` dicts
-        (default ``u1, u2, ...`` and ``y1, y2, ...``).
-    Ts : sample time in s; default the records' ``sampling_time`` (which must agree).
+        (default ``u1, u2, ...`` and ``y1, y2, ...``, also for a single channel: Silverbox gives
+        ``u1`` and ``y1``; CLI: ``nnfmu import nonlinear-benchmark NAME --inputs u --outputs y``).
+    Ts : sample time in s; default the training records' ``sampling_time``. Records whose
+        sampling times differ by more than 1e-4 (relative) are refused unless ``Ts`` is given.
     name : the benchmark's name, recorded in ``source``.
 
     Returns
@@ -98,7 +103,7 @@ def from_benchmark(
                   [_column(r.y, f"{s} record {i} y") for i, r in enumerate(recs)]) for s, recs in splits.items()}
     source = {"kind": "nonlinear-benchmark", "benchmark": name, "name": name or "benchmark",
               "records": {s: [str(getattr(r, "name", "") or "") for r in recs] for s, recs in splits.items()}}
-    ds = from_arrays(Ts=_sample_time([r for recs in splits.values() for r in recs], Ts),
+    ds = from_arrays(Ts=_sample_time(splits, Ts),
                      u_train=arrays["train"][0], y_train=arrays["train"][1],
                      u_test=arrays["test"][0], y_test=arrays["test"][1],
                      u_valid=arrays.get("valid", (None, None))[0], y_valid=arrays.get("valid", (None, None))[1],

@@ -434,7 +434,7 @@ def _check_split(tr: Trajectories, name: str, n_u: int, n_y: int, pre: str) -> N
                 k, j = np.argwhere(bad)[0]
                 raise DataError(
                     f"{pre}{name} trajectory {i}: array {var!r} has {int(bad.sum())} non-finite value(s) "
-                    f"(first at step {k}, channel {j}: {arr[k, j]}); remove or interpolate them before use"
+                    f"(first at step {k}, channel {j}, 0-based: {arr[k, j]}); remove or interpolate them before use"
                 )
         if len(u) != len(y):
             raise ShapeError(f"{pre}{name} trajectory {i}: u has {len(u)} samples but y has {len(y)}")

@@ -22,10 +22,10 @@ import numpy as np
 
 from nnfmu.data.dataset import SPLIT_NAMES, Dataset, make_trajectories
 from nnfmu.data.resample import decimate
+from nnfmu.data.sampling import common_sample_time, measured_step
 from nnfmu.data.tables import Table, format_of, read_table
 from nnfmu.errors import DataError
 
-_TS_RTOL = 0.01  # a time column whose steps vary more than this is not uniformly sampled
 NO_TEST = ("no test split: every model is scored on held-out test data. Give test files (Python: "
            "files={'train': ..., 'test': ...}; CLI: --test FILE...) or the test columns of the same files "
            "(Python: columns={'test': [...]}; CLI: --test-columns COL,...)")
@@ -132,28 +132,36 @@ def _stack(table: Table, cols: list[tuple[str, ...]], where: str) -> np.ndarray:
     return np.column_stack([table.columns[c] for c in flat])
 
 
-def _sample_time(reader: _Reader, files: dict, Ts, time_column) -> float:
-    if (Ts is None) == (time_column is None):
-        raise DataError("give either the sample time Ts (in s) or a time column to read it from, not "
-                        + ("both" if Ts is not None else "neither"))
-    if Ts is not None:
-        return float(Ts)
-    steps = {}
-    for path in {p for group in files.values() for p in group}:
+_TIMING = ("Ts", "time_column", "Ts_column", "fs_column")
+
+
+def _sample_time(reader: _Reader, files: dict, timing: dict) -> float:
+    """The files' sample time in s from exactly one of ``timing``'s keys (see :func:`load_files`)."""
+    given = [k for k in _TIMING if timing.get(k) is not None]
+    if len(given) != 1:
+        raise DataError("give the sample time one way: Ts (in s), a time column (time_column; CLI --time), or a "
+                        "column or variable holding Ts in s (Ts_column; CLI --Ts-column) or the rate in Hz "
+                        f"(fs_column; CLI --fs-column); got {' and '.join(given) if given else 'none'}")
+    (kind,) = given
+    if kind == "Ts":
+        Ts = float(timing["Ts"])
+        if not (np.isfinite(Ts) and Ts > 0):
+            raise DataError(f"the sample time Ts (CLI --Ts) must be a positive number of seconds, "
+                            f"got {timing['Ts']!r}")
+        return Ts
+    per_file = {}
+    for path in dict.fromkeys(p for group in files.values() for p in group):
         table = reader.table(path)
-        (col,) = table.resolve(time_column)
-        dt = np.diff(table.columns[col])
-        Ts_file = float(np.median(dt)) if len(dt) else float("nan")
-        if not Ts_file > 0 or np.abs(dt - Ts_file).max() > _TS_RTOL * Ts_file:
-            raise DataError(f"{path}: the time column {col!r} is not uniformly increasing (steps from "
-                            f"{dt.min():g} to {dt.max():g} s); resample the record first, or give Ts instead")
-        steps[path] = Ts_file
-    Ts_all = float(np.median(list(steps.values())))
-    odd = [str(p) for p, v in steps.items() if abs(v - Ts_all) > 1e-6 * Ts_all]
-    if odd:
-        raise DataError(f"the files have different sample times ({sorted(set(steps.values()))} s; {odd} differ); "
-                        "resample them to one Ts first")
-    return Ts_all
+        if kind == "time_column":
+            (col,) = table.resolve(timing[kind])
+            per_file[str(path)] = measured_step(table.columns[col], f"{path}: the time column {col!r}")
+            continue
+        value = table.setting(timing[kind])
+        if not (np.isfinite(value) and value > 0):
+            raise DataError(f"{path}: {timing[kind]!r} holds {value:g}; a sample "
+                            f"{'time' if kind == 'Ts_column' else 'rate'} must be positive")
+        per_file[str(path)] = value if kind == "Ts_column" else 1.0 / value
+    return common_sample_time(per_file, [str(p) for p in files["train"]], "give Ts to force one")
 
 
 def load_files(
@@ -165,6 +173,8 @@ def load_files(
     units: Mapping[str, str] | Sequence[str] | None = None,
     Ts: float | None = None,
     time_column: str | int | None = None,
+    Ts_column: str | int | None = None,
+    fs_column: str | int | None = None,
     resample: int = 1,
     valid_fraction: float | None = None,
     valid_trajectories: int | None = None,
@@ -187,7 +197,12 @@ def load_files(
         order (inputs first), or a dict keyed by channel name (or original reference).
         ``columns={"test": ["uVal", "yVal"]}`` reads the test split from other columns.
     units : dict channel name -> unit, or a list (inputs then outputs), optional
-    Ts, time_column : the sample time in s, or the column holding time in s (one of the two)
+    Ts, time_column, Ts_column, fs_column : the sample time, one of the four
+        ``Ts`` in s; or ``time_column``, time stamps in s (Ts is their median step, rounded to the
+        decimals the stamps carry, :func:`~nnfmu.data.sampling.measured_step`); or ``Ts_column``
+        (in s) or ``fs_column`` (in Hz), a setting given once: a column filled in some rows only (the
+        F-16 benchmark's ``Fs``, in its first row) or a single number of a .mat/.npz file. Files whose
+        sample times agree to 1e-4 (relative) share the training files' median; Ts forces one.
     resample : int
         Keep every ``resample``-th sample after an anti-aliasing filter (:mod:`nnfmu.data.resample`);
         the dataset's Ts is ``resample`` times the files'.
@@ -218,7 +233,8 @@ def load_files(
     input_entries = entries(inputs, "inputs")
     base, n_in = input_entries + entries(outputs, "outputs"), len(input_entries)
     reader = _Reader(None if fmt is None else format_of(Path(), fmt))
-    Ts_files = _sample_time(reader, file_lists, Ts, time_column)
+    Ts_files = _sample_time(reader, file_lists, {"Ts": Ts, "time_column": time_column, "Ts_column": Ts_column,
+                                                 "fs_column": fs_column})
     first = file_lists["train"][0]
     names = _names(reader.table(first), base, reader.columns(first, base), n_in)
     seen: dict = {}
@@ -226,7 +242,8 @@ def load_files(
                                _override(base, columns[split], split) if split in columns else base,
                                names, resample, seen) for split in splits}
     source = _source(file_lists, columns, splits, reader, base, resample, Ts_files)
-    ds = Dataset(Ts=Ts_files * resample, inputs=tuple(names[0]), outputs=tuple(names[1]), splits=data,
+    Ts = Ts_files if resample == 1 else float(f"{Ts_files * resample:.15g}")  # 3 x 0.1: 0.3, not 0.30000000000000004
+    ds = Dataset(Ts=Ts, inputs=tuple(names[0]), outputs=tuple(names[1]), splits=data,
                  source=source).with_units(units)
     if carve:
         ds = ds.with_validation(valid_fraction, seed=seed, n_traj=valid_trajectories)
@@ -251,6 +268,8 @@ def _read_split(reader: _Reader, split: str, paths: list[Path], ents: tuple[Entr
         if table.shape[1] != n_u + n_y:
             raise DataError(f"{where}: the columns {list(key[1])} give {table.shape[1]} channels, expected {n_u} "
                             f"inputs and {n_y} outputs as in the training files")
+        if len(table) < 2:
+            raise DataError(f"{where} has {len(table)} row(s) of samples; a trajectory needs at least 2")
         table = decimate(table, resample, where)
         us.append(table[:, :n_u])
         ys.append(table[:, n_u:])

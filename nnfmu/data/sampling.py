@@ -1,0 +1,74 @@
+"""The sample time of imported records: measured from a time column, read from a setting, agreed across files.
+
+- :func:`measured_step`: a time column's median step, refused when the steps vary by more than
+  1 %, and rounded to what the column resolves. Time stamps written with 4 decimals give a step
+  with 4 decimals: ``0.1`` rather than the ``0.09999999999994458`` that subtracting ``1000.1 - 1000.0``
+  leaves in binary floating point.
+- :func:`common_sample_time`: records whose sample times agree to :data:`AGREE_RTOL` (relative)
+  are one dataset; its Ts is the training records' median. Measured records of one benchmark differ
+  in the last digits (the two EMPS axis files by 0.0024 %); a larger difference is refused with
+  the way out (force one Ts, or resample).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from nnfmu.errors import DataError
+
+#: Records whose sample times differ by no more than this (relative) share one Ts.
+AGREE_RTOL = 1e-4
+#: A time column whose steps differ from their median by more than this (relative) is not uniformly sampled.
+UNIFORM_RTOL = 0.01
+_ROUND_RTOL = 1e-6  # rounding to the column's resolution never moves Ts by more than this (relative)
+
+
+def resolution(t: np.ndarray) -> int | None:
+    """The fewest decimals (0 .. 15) that represent every time stamp of ``t`` (s) to float precision, or None."""
+    t = np.asarray(t, dtype=np.float64)
+    t = t[np.isfinite(t)]
+    if not len(t):
+        return None
+    tol = 16 * np.finfo(np.float64).eps * max(float(np.abs(t).max()), np.finfo(np.float64).tiny)
+    for decimals in range(16):
+        if np.all(np.abs(t - np.round(t, decimals)) <= tol):
+            return decimals
+    return None
+
+
+def round_to_resolution(Ts: float, t: np.ndarray) -> float:
+    """``Ts`` rounded to the decimals that the time stamps ``t`` resolve, if that moves it by float noise only."""
+    decimals = resolution(t)
+    if decimals is None:
+        return float(Ts)
+    rounded = round(float(Ts), decimals)
+    return rounded if rounded > 0 and abs(rounded - Ts) <= _ROUND_RTOL * Ts else float(Ts)
+
+
+def measured_step(t: np.ndarray, where: str) -> float:
+    """The sample time (s) of time stamps ``t`` (n,) in s: the median step, rounded to the column's resolution."""
+    t = np.asarray(t, dtype=np.float64)
+    if len(t) < 2:
+        raise DataError(f"{where} has {len(t)} row(s); measuring the sample time needs at least 2 (or give Ts)")
+    dt = np.diff(t)
+    Ts = float(np.median(dt))
+    if not np.all(np.isfinite(dt)) or not Ts > 0 or np.abs(dt - Ts).max() > UNIFORM_RTOL * Ts:
+        raise DataError(f"{where} is not uniformly increasing (steps from {np.nanmin(dt):g} to {np.nanmax(dt):g} "
+                        "s); resample the record first, or give Ts instead")
+    return round_to_resolution(Ts, t)
+
+
+def common_sample_time(per_record: Mapping[str, float], train: list[str], how: str) -> float:
+    """One Ts for records whose own sample times agree to :data:`AGREE_RTOL`: the median over ``train``.
+
+    ``per_record`` maps a record's name to its sample time in s; ``how`` says how to force one Ts.
+    """
+    Ts = float(np.median([per_record[r] for r in train]))
+    odd = {r: v for r, v in per_record.items() if abs(v - Ts) > AGREE_RTOL * Ts}
+    if odd:
+        shown = ", ".join(f"{r}: {v:.10g} s" for r, v in list(per_record.items())[:6])
+        raise DataError(f"the records' sample times differ by more than {AGREE_RTOL:g} (relative) from the training "
+                        f"records' {Ts:.10g} s ({shown}); {how}, or resample the records to one Ts")
+    return Ts
