@@ -11,20 +11,25 @@ so it never reaches statistics, training or scores, and a NaN inside a
 trajectory's own samples is still reported as bad data.
 
 Writing is atomic: the folder is built under a temporary name beside the
-target and renamed into place, so a failure leaves no half-written dataset.
+target, ``.<name>.<pid>.<random>.tmp``, and renamed into place, so a failure
+leaves no half-written dataset. A temporary folder that a killed process left
+behind is removed by the next save of the same target (:func:`remove_stale_temp_dirs`).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
 import tempfile
+import time
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from nnfmu.atomic import describe_os_error
 from nnfmu.data.dataset import SPLIT_NAMES, Dataset, Trajectories, _check_split
 from nnfmu.errors import DataError, DataFileError, ShapeError
 
@@ -49,10 +54,10 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
     parent = path.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent))
+        remove_stale_temp_dirs(path)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
     except OSError as exc:
-        raise DataFileError(f"cannot write the dataset folder {path}: {exc.strerror or exc}; "
-                            "choose a writable location") from exc
+        raise _write_error(exc, path) from exc
     try:
         for name, tr in ds.splits.items():
             _write_split(tmp / f"{name}.npz", tr)
@@ -60,10 +65,46 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
         _replace_dir(tmp, path)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        if isinstance(exc, OSError):
-            raise DataFileError(f"cannot write the dataset folder {path}: {exc}") from exc
+        if isinstance(exc, OSError) and not isinstance(exc, DataFileError):
+            raise _write_error(exc, path) from exc
         raise
     return path
+
+
+def _write_error(exc: OSError, path: Path) -> DataFileError:
+    """One line: the folder, the cause, what to do (a full disk: free space or write elsewhere)."""
+    if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)):
+        return DataFileError(f"no space left on device at {path}; free space or choose another folder "
+                             "(CLI: another -o)")
+    return DataFileError(f"cannot write the dataset folder {describe_os_error(exc, path)}")
+
+
+def remove_stale_temp_dirs(path: Path) -> list[Path]:
+    """Remove the temporary folders of earlier saves of ``path`` that were abandoned; return them.
+
+    A save builds ``.<name>.<pid>.<random>.tmp`` beside ``path``. One is abandoned when its
+    process is gone (killed by SIGKILL or a power loss); one without a pid (written before the
+    pid was part of the name) when it is older than :data:`nnfmu.atomic.STALE_AFTER_S`. A
+    folder of a save still running, or of another name, is never touched.
+    """
+    from nnfmu.atomic import STALE_AFTER_S, _pid_alive, _temp_pattern
+
+    pattern, removed = _temp_pattern(path, ""), []
+    try:
+        candidates = [p for p in path.parent.iterdir() if pattern.fullmatch(p.name)]
+    except OSError:
+        return removed
+    for candidate in candidates:
+        pid = pattern.fullmatch(candidate.name).group("pid")
+        try:
+            if candidate.is_symlink() or not candidate.is_dir():
+                continue
+            if (not _pid_alive(int(pid))) if pid else time.time() - candidate.stat().st_mtime > STALE_AFTER_S:
+                shutil.rmtree(candidate)
+                removed.append(candidate)
+        except OSError:
+            pass  # gone already, or not ours to remove
+    return removed
 
 
 def _write_split(file: Path, tr: Trajectories) -> None:
