@@ -48,6 +48,20 @@ nnfmu_status nnfmu_error(nnfmu_instance *inst, const char *fmt, ...) {
   return NNFMU_ERROR;
 }
 
+nnfmu_status nnfmu_reject(nnfmu_instance *inst, const char *fmt, ...) {
+  va_list args;
+  va_start(args, fmt);
+  vlog(inst, NNFMU_ERROR, fmt, args);
+  va_end(args);
+  return NNFMU_ERROR;
+}
+
+nnfmu_status nnfmu_not_null(nnfmu_instance *inst, const char *caller, const char *name, const void *pointer,
+                            size_t count) {
+  if (pointer || count == 0) return NNFMU_OK;
+  return nnfmu_error(inst, "%s: argument %s must not be NULL", caller, name);
+}
+
 void nnfmu_log_early(nnfmu_log_sink sink, void *env, const char *instance_name, const char *fmt, ...) {
   char buffer[512];
   va_list args;

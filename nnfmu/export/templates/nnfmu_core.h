@@ -23,6 +23,9 @@
  * - Calls the FMI 2.0 / 3.0 state machines do not allow in the current state return an Error, and
  *   any Error puts the instance in the error state (reset, free, get or set an FMU state go on).
  * - An FMU state holds everything above, the mode included: set into a fresh instance, it resumes.
+ *   A serialized state carries a checksum, and every field is checked when it is read back; a
+ *   refused state is an Error that leaves the instance as it was.
+ * - NULL pointer arguments (arrays with a nonzero count included) are an Error with a message.
  */
 #ifndef NNFMU_CORE_H
 #define NNFMU_CORE_H
@@ -78,7 +81,8 @@ NNFMU_INTERNAL double nnfmu_time(const nnfmu_instance *inst);
 /* FMU state: an opaque snapshot of the mode, time, inputs, parameters, outputs and model state x. */
 NNFMU_INTERNAL nnfmu_status nnfmu_get_state(nnfmu_instance *inst, void **state);
 NNFMU_INTERNAL nnfmu_status nnfmu_set_state(nnfmu_instance *inst, const void *state);
-NNFMU_INTERNAL void nnfmu_free_state(void **state);
+/* Frees *state and sets it to NULL. Tolerates the state itself passed instead of its address (fmusim 0.0.39). */
+NNFMU_INTERNAL nnfmu_status nnfmu_free_state(nnfmu_instance *inst, const char *caller, void **state);
 NNFMU_INTERNAL size_t nnfmu_serialized_size(void);
 NNFMU_INTERNAL nnfmu_status nnfmu_serialize(nnfmu_instance *inst, const void *state, unsigned char *bytes, size_t size);
 NNFMU_INTERNAL nnfmu_status nnfmu_deserialize(nnfmu_instance *inst, const unsigned char *bytes, size_t size,
@@ -86,6 +90,9 @@ NNFMU_INTERNAL nnfmu_status nnfmu_deserialize(nnfmu_instance *inst, const unsign
 
 /* An Error: log it (always) and put the instance in the error state; returns NNFMU_ERROR. */
 NNFMU_INTERNAL nnfmu_status nnfmu_error(nnfmu_instance *inst, const char *fmt, ...);
+/* NNFMU_OK if `pointer` is not NULL or `count` is 0; else an Error that names the argument `name`. */
+NNFMU_INTERNAL nnfmu_status nnfmu_not_null(nnfmu_instance *inst, const char *caller, const char *name,
+                                           const void *pointer, size_t count);
 /* Log before an instance exists (wrong token, unsupported interface type). */
 NNFMU_INTERNAL void nnfmu_log_early(nnfmu_log_sink sink, void *env, const char *instance_name, const char *fmt, ...);
 

@@ -40,6 +40,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
   }
   inst = (fmi2_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
+  inst->magic = FMI2_INSTANCE_MAGIC;
   inst->le = le;
   inst->core = nnfmu_instantiate(instanceName, fmuGUID, le.logger ? fmi2_sink : NULL, &inst->le, loggingOn);
   if (!inst->core) {
@@ -53,7 +54,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 }
 
 void fmi2FreeInstance(fmi2Component c) {
-  if (!c) return;
+  if (!c || ((fmi2_instance *)c)->magic != FMI2_INSTANCE_MAGIC) return; /* NULL, or freed already */
+  ((fmi2_instance *)c)->magic = 0;
   nnfmu_free(INSTANCE);
   free(c);
 }
@@ -100,6 +102,8 @@ fmi2Status fmi2Reset(fmi2Component c) {
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetReal", vr, nvr);
+  NOT_NULL("fmi2GetReal", value, nvr);
   for (i = 0; i < nvr; ++i)
     if (nnfmu_get_real(INSTANCE, "fmi2GetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
@@ -108,6 +112,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2SetReal", vr, nvr);
+  NOT_NULL("fmi2SetReal", value, nvr);
   for (i = 0; i < nvr; ++i)
     if (nnfmu_set_real(INSTANCE, "fmi2SetReal", vr[i], &value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
@@ -118,6 +124,8 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
   size_t i;
   long long v;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetInteger", vr, nvr);
+  NOT_NULL("fmi2GetInteger", value, nvr);
   for (i = 0; i < nvr; ++i) {
     if (nnfmu_get_int(INSTANCE, "fmi2GetInteger", NNFMU_INTEGER, vr[i], &v) != NNFMU_OK) return fmi2Error;
     value[i] = (fmi2Integer)v;
@@ -128,6 +136,8 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2SetInteger", vr, nvr);
+  NOT_NULL("fmi2SetInteger", value, nvr);
   for (i = 0; i < nvr; ++i)
     if (nnfmu_set_int(INSTANCE, "fmi2SetInteger", NNFMU_INTEGER, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
@@ -137,6 +147,8 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
   size_t i;
   long long v;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetBoolean", vr, nvr);
+  NOT_NULL("fmi2GetBoolean", value, nvr);
   for (i = 0; i < nvr; ++i) {
     if (nnfmu_get_int(INSTANCE, "fmi2GetBoolean", NNFMU_BOOLEAN, vr[i], &v) != NNFMU_OK) return fmi2Error;
     value[i] = v ? fmi2True : fmi2False;
@@ -147,6 +159,8 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2SetBoolean", vr, nvr);
+  NOT_NULL("fmi2SetBoolean", value, nvr);
   for (i = 0; i < nvr; ++i)
     if (nnfmu_set_int(INSTANCE, "fmi2SetBoolean", NNFMU_BOOLEAN, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
   return fmi2OK;
@@ -173,13 +187,13 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
   return (fmi2Status)nnfmu_set_state(INSTANCE, FMUstate);
 }
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-  (void)c;
-  nnfmu_free_state(FMUstate);
-  return fmi2OK;
+  CHECK_INSTANCE();
+  return (fmi2Status)nnfmu_free_state(INSTANCE, "fmi2FreeFMUstate", FMUstate);
 }
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
   (void)FMUstate;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2SerializedFMUstateSize", size, 1);
   *size = nnfmu_serialized_size();
   return fmi2OK;
 }
@@ -240,6 +254,7 @@ fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *va
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetRealStatus", value, 1);
   if (s != fmi2LastSuccessfulTime) return unsupported(c, "fmi2GetRealStatus", "only fmi2LastSuccessfulTime exists");
   return (fmi2Status)nnfmu_last_time(INSTANCE, "fmi2GetRealStatus", value);
 }
@@ -252,6 +267,7 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetBooleanStatus", value, 1);
   if (s != fmi2Terminated) return unsupported(c, "fmi2GetBooleanStatus", "only fmi2Terminated exists");
   *value = fmi2False; /* the FMU never asks to end the simulation */
   return fmi2OK;

@@ -11,12 +11,14 @@ fmi2Status fmi2EnterEventMode(fmi2Component c) {
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
+  int restart;
   CHECK_INSTANCE();
-  if (nnfmu_me_update_discrete_states(INSTANCE, "fmi2NewDiscreteStates") != NNFMU_OK) return fmi2Error;
+  NOT_NULL("fmi2NewDiscreteStates", eventInfo, 1);
+  if (nnfmu_me_update_discrete_states(INSTANCE, "fmi2NewDiscreteStates", &restart) != NNFMU_OK) return fmi2Error;
   eventInfo->newDiscreteStatesNeeded = fmi2False; /* no discrete states, no time events */
   eventInfo->terminateSimulation = fmi2False;
   eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
-  eventInfo->valuesOfContinuousStatesChanged = fmi2False;
+  eventInfo->valuesOfContinuousStatesChanged = restart ? fmi2True : fmi2False; /* inputs jumped: restart */
   eventInfo->nextEventTimeDefined = fmi2False;
   eventInfo->nextEventTime = 0.0;
   return fmi2OK;
@@ -31,6 +33,8 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2CompletedIntegratorStep", enterEventMode, 1);
+  NOT_NULL("fmi2CompletedIntegratorStep", terminateSimulation, 1);
   *enterEventMode = fmi2False;
   *terminateSimulation = fmi2False;
   return (fmi2Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi2CompletedIntegratorStep");
@@ -52,8 +56,8 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
-  (void)eventIndicators;
   CHECK_INSTANCE();
+  NOT_NULL("fmi2GetEventIndicators", eventIndicators, ni);
   return (fmi2Status)nnfmu_me_event_indicators(INSTANCE, "fmi2GetEventIndicators", ni);
 }
 

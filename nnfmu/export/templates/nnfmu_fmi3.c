@@ -51,6 +51,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   }
   inst = (fmi3_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
+  inst->magic = FMI3_INSTANCE_MAGIC;
   inst->le = le;
   inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
                                  loggingOn);
@@ -91,7 +92,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
-  if (!instance) return;
+  if (!instance || ((fmi3_instance *)instance)->magic != FMI3_INSTANCE_MAGIC) return; /* NULL, or freed already */
+  ((fmi3_instance *)instance)->magic = 0;
   nnfmu_free(INSTANCE);
   free(instance);
 }
@@ -142,6 +144,8 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Float64 values[], size_t nValues) {
   size_t i, k = 0;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetFloat64", valueReferences, nValueReferences);
+  NOT_NULL("fmi3GetFloat64", values, nValues);
   if (check_float64_count(instance, "fmi3GetFloat64", valueReferences, nValueReferences, nValues) != fmi3OK)
     return fmi3Error;
   for (i = 0; i < nValueReferences; k += nnfmu_real_size(valueReferences[i++]))
@@ -153,6 +157,8 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Float64 values[], size_t nValues) {
   size_t i, k = 0;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3SetFloat64", valueReferences, nValueReferences);
+  NOT_NULL("fmi3SetFloat64", values, nValues);
   if (check_float64_count(instance, "fmi3SetFloat64", valueReferences, nValueReferences, nValues) != fmi3OK)
     return fmi3Error;
   for (i = 0; i < nValueReferences; k += nnfmu_real_size(valueReferences[i++]))
@@ -166,6 +172,8 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
   size_t i;
   long long v;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetInt32", valueReferences, nValueReferences);
+  NOT_NULL("fmi3GetInt32", values, nValues);
   if (check_count(instance, "fmi3GetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i) {
     if (nnfmu_get_int(INSTANCE, "fmi3GetInt32", NNFMU_INTEGER, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
@@ -178,6 +186,8 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                         const fmi3Int32 values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3SetInt32", valueReferences, nValueReferences);
+  NOT_NULL("fmi3SetInt32", values, nValues);
   if (check_count(instance, "fmi3SetInt32", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
     if (nnfmu_set_int(INSTANCE, "fmi3SetInt32", NNFMU_INTEGER, valueReferences[i], values[i]) != NNFMU_OK)
@@ -190,6 +200,8 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
   size_t i;
   long long v;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetBoolean", valueReferences, nValueReferences);
+  NOT_NULL("fmi3GetBoolean", values, nValues);
   if (check_count(instance, "fmi3GetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i) {
     if (nnfmu_get_int(INSTANCE, "fmi3GetBoolean", NNFMU_BOOLEAN, valueReferences[i], &v) != NNFMU_OK) return fmi3Error;
@@ -202,6 +214,8 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                           const fmi3Boolean values[], size_t nValues) {
   size_t i;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3SetBoolean", valueReferences, nValueReferences);
+  NOT_NULL("fmi3SetBoolean", values, nValues);
   if (check_count(instance, "fmi3SetBoolean", nValueReferences, nValues) != fmi3OK) return fmi3Error;
   for (i = 0; i < nValueReferences; ++i)
     if (nnfmu_set_int(INSTANCE, "fmi3SetBoolean", NNFMU_BOOLEAN, valueReferences[i], values[i]) != NNFMU_OK)
@@ -268,6 +282,7 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueRef
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
                                                size_t *nDependencies) {
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetNumberOfVariableDependencies", nDependencies, 1);
   if (!nnfmu_is_output(valueReference))
     return (fmi3Status)nnfmu_error(INSTANCE, "fmi3GetNumberOfVariableDependencies: value reference %lu "
                                  "is not an output", (unsigned long)valueReference);
@@ -297,13 +312,13 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
   return (fmi3Status)nnfmu_set_state(INSTANCE, FMUState);
 }
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-  (void)instance;
-  nnfmu_free_state(FMUState);
-  return fmi3OK;
+  CHECK_INSTANCE();
+  return (fmi3Status)nnfmu_free_state(INSTANCE, "fmi3FreeFMUState", FMUState);
 }
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
   (void)FMUState;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3SerializedFMUStateSize", size, 1);
   *size = nnfmu_serialized_size();
   return fmi3OK;
 }

@@ -12,13 +12,21 @@ typedef struct {
   fmi3InstanceEnvironment environment;
 } logger_env;
 
+/* `magic` is FMI3_INSTANCE_MAGIC while the instance lives and cleared when it is freed, so that a call
+ * on a freed instance returns fmi3Error while the memory is still mapped. Best effort only: using freed
+ * memory is undefined behaviour, and once the allocator reuses it anything can happen. */
+#define FMI3_INSTANCE_MAGIC 0x6e6e666d756933ULL /* "nnfmui3" */
 typedef struct {
+  unsigned long long magic;
   logger_env le;
   nnfmu_instance *core;
 } fmi3_instance;
 
 #define INSTANCE (((fmi3_instance *)instance)->core)
-#define CHECK_INSTANCE() if (!instance) return fmi3Error
+#define CHECK_INSTANCE() if (!instance || ((fmi3_instance *)instance)->magic != FMI3_INSTANCE_MAGIC) return fmi3Error
+/* Return fmi3Error with a message when `pointer` is NULL although `count` values are to be read or written. */
+#define NOT_NULL(caller, pointer, count) \
+  if (nnfmu_not_null(INSTANCE, caller, #pointer, pointer, count) != NNFMU_OK) return fmi3Error
 
 #define NO_MX "this FMU is for co-simulation only"
 /* The FMI 3 logger sink, shared with nnfmu_fmi3_me.c's instantiate. */

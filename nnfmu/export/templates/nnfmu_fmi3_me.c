@@ -17,6 +17,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
   (void)resourcePath; (void)visible;
   inst = (fmi3_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
+  inst->magic = FMI3_INSTANCE_MAGIC;
   inst->le.log_message = logMessage;
   inst->le.environment = instanceEnvironment;
   inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
@@ -38,12 +39,20 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
+  const char *caller = "fmi3UpdateDiscreteStates";
+  int restart;
   CHECK_INSTANCE();
-  if (nnfmu_me_update_discrete_states(INSTANCE, "fmi3UpdateDiscreteStates") != NNFMU_OK) return fmi3Error;
+  NOT_NULL(caller, discreteStatesNeedUpdate, 1);
+  NOT_NULL(caller, terminateSimulation, 1);
+  NOT_NULL(caller, nominalsOfContinuousStatesChanged, 1);
+  NOT_NULL(caller, valuesOfContinuousStatesChanged, 1);
+  NOT_NULL(caller, nextEventTimeDefined, 1);
+  NOT_NULL(caller, nextEventTime, 1);
+  if (nnfmu_me_update_discrete_states(INSTANCE, caller, &restart) != NNFMU_OK) return fmi3Error;
   *discreteStatesNeedUpdate = fmi3False; /* no discrete states, no time events */
   *terminateSimulation = fmi3False;
   *nominalsOfContinuousStatesChanged = fmi3False;
-  *valuesOfContinuousStatesChanged = fmi3False;
+  *valuesOfContinuousStatesChanged = restart ? fmi3True : fmi3False; /* inputs jumped: restart (nnfmu_me.h) */
   *nextEventTimeDefined = fmi3False;
   *nextEventTime = 0.0;
   return fmi3OK;
@@ -58,6 +67,8 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3CompletedIntegratorStep", enterEventMode, 1);
+  NOT_NULL("fmi3CompletedIntegratorStep", terminateSimulation, 1);
   *enterEventMode = fmi3False;
   *terminateSimulation = fmi3False;
   return (fmi3Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi3CompletedIntegratorStep");
@@ -82,8 +93,8 @@ fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
-  (void)eventIndicators;
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetEventIndicators", eventIndicators, nEventIndicators);
   return (fmi3Status)nnfmu_me_event_indicators(INSTANCE, "fmi3GetEventIndicators", nEventIndicators);
 }
 
@@ -100,12 +111,14 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetNumberOfEventIndicators", nEventIndicators, 1);
   *nEventIndicators = 0;
   return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
   CHECK_INSTANCE();
+  NOT_NULL("fmi3GetNumberOfContinuousStates", nContinuousStates, 1);
   *nContinuousStates = nnfmu_me_number_of_states();
   return fmi3OK;
 }

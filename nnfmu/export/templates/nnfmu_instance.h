@@ -8,6 +8,8 @@
 #include "model_casadi.h"
 
 #define NNFMU_ALLOC(n) ((n) > 0 ? (n) : 1) /* C has no empty arrays */
+/* The largest max_samples_per_step: the largest Int32 an importer can set. It bounds every step loop. */
+#define NNFMU_MAX_SAMPLES_LIMIT 2147483647LL
 
 /* The FMI modes as bit flags, so that a call names the set of modes it is allowed in. */
 typedef enum {
@@ -60,10 +62,14 @@ struct nnfmu_instance {
 
 /* Log a message of any status (Errors and Warnings always, OK only with logging on); returns status. */
 NNFMU_INTERNAL nnfmu_status nnfmu_log(nnfmu_instance *inst, nnfmu_status status, const char *fmt, ...);
+/* Log an Error but leave the instance as it was (a refused FMU state: the old one stays); returns NNFMU_ERROR. */
+NNFMU_INTERNAL nnfmu_status nnfmu_reject(nnfmu_instance *inst, const char *fmt, ...);
 /* NNFMU_OK if the instance is in one of `modes`; otherwise an Error that names the mode and the allowed ones. */
 NNFMU_INTERNAL nnfmu_status nnfmu_require(nnfmu_instance *inst, const char *caller, int modes);
 /* The values of a freshly instantiated (or reset) instance. */
 NNFMU_INTERNAL void nnfmu_start_values(nnfmu_values *v);
+/* How many sample instants t0 + k Ts (k >= 1) lie at or before time t, as a double (it may be huge). */
+NNFMU_INTERNAL double nnfmu_samples_by(const nnfmu_values *v, double t);
 /* Inputs and parameters finite (else an Error) and inputs inside [min, max] (else a Warning or an Error). */
 NNFMU_INTERNAL nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t);
 

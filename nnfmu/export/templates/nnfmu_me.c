@@ -13,6 +13,7 @@ typedef struct {
   double xdot[NNFMU_ALLOC(NNFMU_NX)], y[NNFMU_ALLOC(NNFMU_NY)];
   double dx[NNFMU_ALLOC(NNFMU_NX)], du[NNFMU_ALLOC(NNFMU_NU)]; /* seed */
   double dxdot[NNFMU_ALLOC(NNFMU_NX)], dy[NNFMU_ALLOC(NNFMU_NY)]; /* sensitivity */
+  double u_event[NNFMU_ALLOC(NNFMU_NU)], p_event[NNFMU_ALLOC(NNFMU_NP)]; /* as when the event began */
   int model_exchange; /* instantiated for Model Exchange (else: co-simulation of the same FMU) */
   double *w;
   casadi_int *iw;
@@ -102,10 +103,17 @@ static nnfmu_status evaluate(nnfmu_instance *inst, const char *caller) {
   return guard;
 }
 
+/* Remember the inputs and parameters as they are when an event begins (see nnfmu_me_update_discrete_states). */
+static void event_begins(nnfmu_instance *inst) {
+  memcpy(ME(inst)->u_event, inst->v.u, sizeof inst->v.u);
+  memcpy(ME(inst)->p_event, inst->v.p, sizeof inst->v.p);
+}
+
 nnfmu_status nnfmu_me_exit_initialization(nnfmu_instance *inst) {
   memcpy(inst->v.x, state(inst), sizeof inst->v.x);
   inst->v.x_ready = 1;
   inst->v.mode = MODE_EVENT;
+  event_begins(inst);
   return NNFMU_OK;
 }
 
@@ -125,14 +133,16 @@ nnfmu_status nnfmu_me_set_time(nnfmu_instance *inst, const char *caller, double 
 }
 
 nnfmu_status nnfmu_me_set_states(nnfmu_instance *inst, const char *caller, const double *x, size_t n) {
-  if (nnfmu_require(inst, caller, AFTER_INIT) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK)
+  if (nnfmu_require(inst, caller, AFTER_INIT) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK ||
+      nnfmu_not_null(inst, caller, "x", x, n) != NNFMU_OK)
     return NNFMU_ERROR;
   memcpy(inst->v.x, x, sizeof inst->v.x);
   return NNFMU_OK;
 }
 
 nnfmu_status nnfmu_me_get_states(nnfmu_instance *inst, const char *caller, double *x, size_t n) {
-  if (nnfmu_require(inst, caller, STATES_READABLE) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK)
+  if (nnfmu_require(inst, caller, STATES_READABLE) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK ||
+      nnfmu_not_null(inst, caller, "x", x, n) != NNFMU_OK)
     return NNFMU_ERROR;
   memcpy(x, state(inst), NNFMU_NX * sizeof *x);
   return NNFMU_OK;
@@ -140,7 +150,8 @@ nnfmu_status nnfmu_me_get_states(nnfmu_instance *inst, const char *caller, doubl
 
 nnfmu_status nnfmu_me_get_derivatives(nnfmu_instance *inst, const char *caller, double *dx, size_t n) {
   nnfmu_status status;
-  if (nnfmu_require(inst, caller, STATES_READABLE) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK)
+  if (nnfmu_require(inst, caller, STATES_READABLE) != NNFMU_OK || check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK ||
+      nnfmu_not_null(inst, caller, "derivatives", dx, n) != NNFMU_OK)
     return NNFMU_ERROR;
   status = evaluate(inst, caller);
   if (status != NNFMU_ERROR) memcpy(dx, ME(inst)->xdot, NNFMU_NX * sizeof *dx);
@@ -148,7 +159,9 @@ nnfmu_status nnfmu_me_get_derivatives(nnfmu_instance *inst, const char *caller, 
 }
 
 nnfmu_status nnfmu_me_get_nominals(nnfmu_instance *inst, const char *caller, double *nominals, size_t n) {
-  if (check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK) return NNFMU_ERROR;
+  if (check_size(inst, caller, n, NNFMU_NX) != NNFMU_OK || nnfmu_not_null(inst, caller, "nominals", nominals, n) !=
+      NNFMU_OK)
+    return NNFMU_ERROR;
   memcpy(nominals, nnfmu_x_nominal, NNFMU_NX * sizeof *nominals);
   return NNFMU_OK;
 }
@@ -161,12 +174,18 @@ nnfmu_status nnfmu_me_event_indicators(nnfmu_instance *inst, const char *caller,
 
 nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller) {
   if (nnfmu_require(inst, caller, AFTER_INIT) != NNFMU_OK) return NNFMU_ERROR;
+  if (inst->v.mode == MODE_CONTINUOUS) event_begins(inst);
   inst->v.mode = MODE_EVENT;
   return NNFMU_OK;
 }
 
-nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller) {
-  return nnfmu_require(inst, caller, MODE_EVENT); /* no discrete states, no time events */
+nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, int *restart) {
+  me_work *me = ME(inst);
+  if (nnfmu_require(inst, caller, MODE_EVENT) != NNFMU_OK) return NNFMU_ERROR; /* no discrete states, time events */
+  *restart = memcmp(me->u_event, inst->v.u, sizeof inst->v.u) != 0 ||
+             memcmp(me->p_event, inst->v.p, sizeof inst->v.p) != 0;
+  event_begins(inst); /* once per change: the next call of the same event iteration reports no restart */
+  return NNFMU_OK;
 }
 
 nnfmu_status nnfmu_me_enter_continuous_time_mode(nnfmu_instance *inst, const char *caller) {
@@ -209,7 +228,11 @@ nnfmu_status nnfmu_me_directional_derivative(nnfmu_instance *inst, const char *c
   if (!me->model_exchange)
     return nnfmu_error(inst, "%s: directional derivatives are provided for Model Exchange only "
                        "(providesDirectionalDerivative is false for co-simulation)", caller);
-  if (nnfmu_require(inst, caller, AFTER_INIT) != NNFMU_OK) return NNFMU_ERROR;
+  if (nnfmu_require(inst, caller, AFTER_INIT) != NNFMU_OK || nnfmu_not_null(inst, caller, "unknowns", unknowns,
+      n_unknowns) != NNFMU_OK || nnfmu_not_null(inst, caller, "knowns", knowns, n_knowns) != NNFMU_OK ||
+      nnfmu_not_null(inst, caller, "seed", seed, n_knowns) != NNFMU_OK ||
+      nnfmu_not_null(inst, caller, "sensitivity", sensitivity, n_unknowns) != NNFMU_OK)
+    return NNFMU_ERROR;
   if (set_seeds(inst, caller, knowns, n_knowns, seed) != NNFMU_OK) return NNFMU_ERROR;
   me->arg[0] = state(inst);
   me->arg[1] = inst->v.u;

@@ -11,6 +11,8 @@
  * - Inputs may be set in event and continuous-time mode; tunable parameters in event mode only.
  * - getDerivatives guards the inputs as doStep does: a Warning, and one message per excursion, for an
  *   input outside [min, max] (an Error with input_range_error), an Error for non-finite values.
+ * - An event in which an input or a tunable parameter changed reports valuesOfContinuousStatesChanged
+ *   once, so that every importer restarts its integrator there (the states themselves keep their values).
  * - Directional derivatives: unknowns are derivatives and outputs, knowns are states and inputs,
  *   in event and continuous-time mode.
  */
@@ -38,7 +40,10 @@ NNFMU_INTERNAL size_t nnfmu_me_number_of_states(void);
 
 /* Mode changes: enter event mode, update the (absent) discrete states, enter continuous-time mode. */
 NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller);
-NNFMU_INTERNAL nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller);
+/* *restart: whether an input or a tunable parameter changed since the event began (or since the last call), so
+ * that the right-hand side jumped and the importer must restart its integrator: the wrappers report it as
+ * valuesOfContinuousStatesChanged, the flag on which importers such as fmusim restart (docs/fmu.md). */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, int *restart);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_continuous_time_mode(nnfmu_instance *inst, const char *caller);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller);
 

@@ -4,6 +4,9 @@
 #include <string.h>
 
 #include "nnfmu_instance.h"
+#ifdef NNFMU_MODEL_EXCHANGE
+#include "nnfmu_me.h"
+#endif
 
 /* A communication point counts as reaching a sample instant at most this far before it: 1e-9 of the
  * magnitude of the time, at most 1e-3 Ts, and never less than 16 rounding units of the time. */
@@ -25,8 +28,7 @@ static double time_tolerance(const nnfmu_values *v, double t) {
 /* The time of sample instant k, s. */
 static double instant(const nnfmu_values *v, long long k) { return v->start_time + (double)k * NNFMU_TS; }
 
-/* How many sample instants t0 + k Ts (k >= 1) lie at or before time t, as a double (it may be huge). */
-static double samples_by(const nnfmu_values *v, double t) {
+double nnfmu_samples_by(const nnfmu_values *v, double t) {
   double r = (t - v->start_time + time_tolerance(v, t)) / NNFMU_TS;
   if (!(r >= 1.0)) return 0.0;
   return r < 4e18 ? (double)(long long)r : r; /* floor; beyond long long it only matters that it is huge */
@@ -59,6 +61,15 @@ static nnfmu_status check_finite(nnfmu_instance *inst, const char *caller, doubl
   return NNFMU_OK;
 }
 
+/* What returns the Warning while an input is outside its range, in the words of the interface. */
+static const char *warned_calls(const nnfmu_instance *inst) {
+#ifdef NNFMU_MODEL_EXCHANGE
+  if (nnfmu_me_interface(inst)) return "every evaluation of the derivatives";
+#endif
+  (void)inst;
+  return "every step";
+}
+
 /* The valid-range guard: a Warning with one message per excursion and input, or an Error. */
 static nnfmu_status check_range(nnfmu_instance *inst, const char *caller, double t) {
   nnfmu_status status = NNFMU_OK;
@@ -73,9 +84,9 @@ static nnfmu_status check_range(nnfmu_instance *inst, const char *caller, double
                          nnfmu_u_max[i], nnfmu_u_units[i]);
     if (outside && !inst->v.outside[i])
       nnfmu_log(inst, NNFMU_WARNING, "%s: input %s = %g %s at t = %.16g s leaves its valid range [%g, %g] %s; "
-                "the outputs are extrapolated until it returns (one message per excursion; every step "
+                "the outputs are extrapolated until it returns (one message per excursion; %s "
                 "meanwhile returns a warning)", caller, nnfmu_u_names[i], u, nnfmu_u_units[i], t,
-                nnfmu_u_min[i], nnfmu_u_max[i], nnfmu_u_units[i]);
+                nnfmu_u_min[i], nnfmu_u_max[i], nnfmu_u_units[i], warned_calls(inst));
     inst->v.outside[i] = (unsigned char)outside;
     if (outside) status = NNFMU_WARNING;
   }
@@ -177,6 +188,9 @@ nnfmu_status nnfmu_do_step(nnfmu_instance *inst, const char *caller, double t, d
   if (nnfmu_require(inst, caller, MODE_STEP) != NNFMU_OK) return NNFMU_ERROR;
   if (!(h > 0.0) || !is_finite(target))
     return nnfmu_error(inst, "%s: the communication step size must be positive and finite but was %g s", caller, h);
+  if (v->samples < 0 || v->max_samples < 1 || v->max_samples > NNFMU_MAX_SAMPLES_LIMIT) /* states are checked */
+    return nnfmu_error(inst, "%s: the sample count %lld or max_samples_per_step %lld is corrupt; call reset", caller,
+                       v->samples, v->max_samples);
   tol = time_tolerance(v, t);
   if (!(magnitude(t - v->time) <= tol))
     return nnfmu_error(inst, "%s: currentCommunicationPoint must be where the previous step ended, t = %.16g s "
@@ -185,7 +199,7 @@ nnfmu_status nnfmu_do_step(nnfmu_instance *inst, const char *caller, double t, d
   if (TIME_MIN_TOL_ULPS * DBL_EPSILON * magnitude(target) > 0.25 * NNFMU_TS)
     return nnfmu_error(inst, "%s: at t = %g s double precision cannot resolve Ts = %g s; start the simulation "
                        "at a smaller start time", caller, target, NNFMU_TS);
-  wanted = samples_by(v, target) - (double)v->samples;
+  wanted = nnfmu_samples_by(v, target) - (double)v->samples;
   if (wanted > (double)v->max_samples)
     return nnfmu_error(inst, "%s: the step from t = %.16g s to %.16g s would take %.0f samples of Ts = %g s, more "
                        "than the limit of %lld (parameter max_samples_per_step); take smaller communication "
