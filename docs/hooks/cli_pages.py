@@ -7,6 +7,7 @@ import argparse
 import os
 
 import mkdocs_gen_files
+from mkdocs.structure.files import InclusionLevel
 
 from nnfmu.cli import build_parser
 
@@ -31,3 +32,5 @@ for name, parser in sub.choices.items():
 
 with mkdocs_gen_files.open("cli/SUMMARY.md", "w") as summary:
     summary.writelines(nav.build_literate_nav())
+# the navigation that literate-nav reads, not a page of the site
+mkdocs_gen_files.FilesEditor.current().files.get_file_from_path("cli/SUMMARY.md").inclusion = InclusionLevel.EXCLUDED
