@@ -3,7 +3,7 @@
 The members' own Functions (:func:`nnfmu.export.to_casadi`) are called on their slices of the
 state; the ensemble's output is the mean of theirs, and it is written back into every member's
 state as its newest output, in the member's normalised units, at the slot the member's
-``_inject_y`` writes (recurrent and TCN: the first ``n_y`` entries; MLP: the newest window sample).
+``_inject_y`` writes (found by :func:`nnfmu.models.linear_path.y_slot`).
 """
 
 from __future__ import annotations
@@ -11,13 +11,16 @@ from __future__ import annotations
 import casadi as ca
 
 from nnfmu.export import casadi_nets as nets
-from nnfmu.models import EnsembleStepModel, MLPStepModel, StepModel
+from nnfmu.models import EnsembleStepModel
+from nnfmu.models.linear_path import y_slot
 
 
-def _newest_y_slot(member: StepModel) -> int:
-    """Index of the first entry of the newest output ``y_k`` in a member's flat state."""
-    c = member.config
-    return (c.window - 1) * c.n_y if isinstance(member, MLPStepModel) else 0
+def with_y(x, slot: list[int], yn):
+    """The CasADi column ``x`` with its entries at ``slot`` replaced by ``yn`` (len(slot),)."""
+    parts = ca.vertsplit(x)
+    for j, k in enumerate(slot):
+        parts[k] = yn[j]
+    return ca.vertcat(*parts)
 
 
 def ensemble_to_casadi(model: EnsembleStepModel, member_to_casadi) -> tuple[ca.Function, ca.Function]:
@@ -38,7 +41,6 @@ def ensemble_to_casadi(model: EnsembleStepModel, member_to_casadi) -> tuple[ca.F
     yn_next = (y_next - nets.dm(model.y_mean)) / nets.dm(model.y_std)
     x_next = []
     for m, (xn, _) in zip(model.members, steps):
-        k = _newest_y_slot(m)
-        x_next.append(ca.vertcat(xn[:k], yn_next, xn[k + c.n_y:]))
+        x_next.append(with_y(xn, y_slot(m), yn_next))
     step = ca.Function("step", [x, u], [ca.vertcat(*x_next), y_next], ["x", "u"], ["x_next", "y_next"])
     return init, step

@@ -27,10 +27,11 @@ import torch
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
-from nnfmu.export.ensemble import ensemble_to_casadi
+from nnfmu.export.ensemble import ensemble_to_casadi, with_y
 from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.models import tcn_state
+from nnfmu.models.linear_path import LinearPathStepModel, y_slot
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables, with_starts
 
@@ -122,6 +123,11 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
         if verify:
             verify_export(model, init, step)
         return init, step
+    if isinstance(model, LinearPathStepModel):
+        init, step = _linear_path_to_casadi(model)
+        if verify:
+            verify_export(model, init, step)
+        return init, step
     if not isinstance(model, _MODEL_CLASSES):
         raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
                           f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
@@ -136,6 +142,27 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     if verify:
         verify_export(model, init, step)
+    return init, step
+
+
+def _linear_path_to_casadi(model: LinearPathStepModel) -> tuple[ca.Function, ca.Function]:
+    """The network's own Functions on its slice of the state, the linear path in normalised units beside them."""
+    net_init, net_step = to_casadi(model.net, verify=False)
+    c, m = model.config, model.net.n_x
+    A, B, b, C, d, G, Ky, Ku, k0, alpha = (nets.dm(getattr(model, k)) for k in (
+        "lin_A", "lin_B", "lin_b", "lin_C", "lin_d", "lin_G", "lin_Ky", "lin_Ku", "lin_k0", "alpha"))
+    u_mean, u_std, y_mean, y_std = (nets.dm(b_) for b_ in (model.u_mean, model.u_std, model.y_mean, model.y_std))
+    ins = [ca.MX.sym(net_init.name_in(i), net_init.sparsity_in(i)) for i in range(net_init.n_in())]
+    yn0, un0 = (ins[0] - y_mean) / y_std, (ins[1] - u_mean) / u_std
+    x0 = ca.vertcat(net_init(*ins), ca.mtimes(Ky, yn0) + ca.mtimes(Ku, un0) + k0)
+    init = ca.Function("init", ins, [x0], net_init.name_in(), ["x0"])
+    x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
+    h_next, y_net = net_step(x[:m], u)
+    n = (y_net - y_mean) / y_std  # the network's raw output (its step de-normalises it)
+    z_next = ca.mtimes(A, x[m:]) + ca.mtimes(B, (u - u_mean) / u_std) + b + ca.mtimes(G, n)
+    yn = ca.mtimes(C, z_next) + d + alpha * n
+    x_next = ca.vertcat(with_y(h_next, y_slot(model.net), yn), z_next)
+    step = ca.Function("step", [x, u], [x_next, yn * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     return init, step
 
 

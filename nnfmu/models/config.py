@@ -76,6 +76,10 @@ class ModelConfig:
         1: one network. K > 1: an ensemble of K networks of this config (trained with different
         seeds, :func:`nnfmu.training.train_seeds`) whose mean output is fed back to all of them as
         the one prediction (:mod:`nnfmu.models.ensemble`).
+    linear_order : int
+        0: the network alone. ``n_z > 0``: the network as a zero-initialised correction on a linear path
+        of ``n_z`` states, started at the identified linear baseline (:mod:`nnfmu.models.linear_path`);
+        the path replaces the skip connection and increment mode.
     activation : str
         Nonlinearity of the MLP and TCN layers and of the RNN (RNN: 'tanh' or 'relu').
         The LSTM and GRU have their fixed gate nonlinearities.
@@ -96,6 +100,7 @@ class ModelConfig:
     init_window: int = 1
     encoder_hidden: int = 64
     members: int = 1
+    linear_order: int = 0
 
     def __post_init__(self) -> None:
         if self.arch not in ARCHS:
@@ -104,6 +109,12 @@ class ModelConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ShapeError(f"ModelConfig.{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.linear_order, int) or isinstance(self.linear_order, bool) or self.linear_order < 0:
+            raise ShapeError(f"ModelConfig.linear_order must be an integer >= 0, got {self.linear_order!r}")
+        if self.linear_order and self.increment:
+            raise ConfigError("increment mode and a linear path both carry the output from step to step: the path "
+                              "(linear_order > 0) already integrates what the linear model integrates; drop increment "
+                              "or set linear_order=0")
         if self.arch == "tcn" and self.kernel_size < 2:
             raise ShapeError(f"a TCN needs kernel_size >= 2, got {self.kernel_size}")
         if self.layers is None:

@@ -23,7 +23,18 @@ from torch import nn
 from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import ModelConfig
+from nnfmu.models.config import ARCHS, ModelConfig
+from nnfmu.models.linear_path import LinearPathStepModel
+
+
+def single_model_class(config: ModelConfig) -> type:
+    """The class of one network of ``config``: the architecture's own, or on a linear path (``linear_order > 0``)."""
+    if getattr(config, "linear_order", 0):
+        if config.arch not in ARCHS:
+            raise ShapeError(f"a linear path wraps the networks of nnfmu.models, not {config.arch!r}; "
+                             "set linear_order=0")
+        return LinearPathStepModel
+    return architectures.model_class(config.arch)
 
 
 class EnsembleStepModel(StepModel):
@@ -34,7 +45,7 @@ class EnsembleStepModel(StepModel):
         if config.members < 2:
             raise ShapeError(f"an ensemble needs members >= 2, got {config.members}; build a single network instead")
         member = config.replace(members=1)
-        cls = architectures.model_class(member.arch)
+        cls = single_model_class(member)
         self.members = nn.ModuleList(cls(member, meta) for _ in range(config.members))
         self._check_sizes()
 

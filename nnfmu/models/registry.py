@@ -12,7 +12,7 @@ from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
-from nnfmu.models.ensemble import EnsembleStepModel
+from nnfmu.models.ensemble import EnsembleStepModel, single_model_class
 from nnfmu.models.mlp import MLPStepModel
 from nnfmu.models.recurrent import RecurrentStepModel
 from nnfmu.models.tcn import TCNStepModel
@@ -38,7 +38,7 @@ def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm
         config = ModelConfig.from_dict(config)
     if not isinstance(config, ModelConfig):
         raise ShapeError(f"expected a ModelConfig or a dict, got {type(config).__name__}")
-    cls = EnsembleStepModel if config.members > 1 else architectures.model_class(config.arch)
+    cls = EnsembleStepModel if config.members > 1 else single_model_class(config)
     model = cls(config, meta)
     if norm is not None:
         model.set_normalisation(norm)
