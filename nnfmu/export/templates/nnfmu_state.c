@@ -65,7 +65,7 @@ static const char *check_values(const nnfmu_instance *inst, const nnfmu_values *
     snprintf(why, size, "flags %d and %d must be 0 or 1", v->x_ready, v->range_error);
   else if (me && v->samples != 0)
     snprintf(why, size, "a Model Exchange state counts no samples, got %lld", v->samples);
-  else if (!me && (v->time < v->start_time || (double)v->samples != nnfmu_samples_by(v, v->time)))
+  else if (!me && (double)v->samples != nnfmu_samples_by(v, v->time))
     snprintf(why, size, "%lld samples of Ts = %g s do not lead from the start time %.17g s to the time %.17g s",
              v->samples, NNFMU_TS, v->start_time, v->time);
   else if (!me && v->x_ready != (v->samples > 0))
