@@ -139,6 +139,16 @@ class StepModel(nn.Module):
             return yn + self.feedback_noise * torch.randn_like(yn)
         return yn
 
+    @staticmethod
+    def _unshifted(yn_next: torch.Tensor, fed: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        """Increment mode with feedback noise: the step's output less the noise it started from.
+
+        An increment ``y_{k+1} = y_fed + s N`` starting from the disturbed ``y_fed = y_k + noise`` would carry the
+        noise into every later output, a random walk (issue 21: training losses of 12-600 on an integrating
+        axis). The network still *sees* the disturbed output; the increment is added to the undisturbed one.
+        """
+        return yn_next - (fed - yn)
+
     def _check_sizes(self) -> None:
         """Dry-run init and step at batch 2 so that inconsistent sizes fail at construction."""
         c = self.config
@@ -239,8 +249,13 @@ class StepModel(nn.Module):
         """
         x = self._init_norm(yn0, un[:, 0]) if x0 is None else x0
         ys = [yn0]
+        noisy = bool(self.feedback_noise and self.training)
         for k in range(un.shape[1] - 1):
-            x, yn = self._step_norm(self._inject_y(x, self._feedback(ys[-1])) if self.feedback_noise else x, un[:, k])
+            fed = self._feedback(ys[-1]) if noisy else None
+            x, yn = self._step_norm(x if fed is None else self._inject_y(x, fed), un[:, k])
+            if fed is not None and self.config.increment:
+                yn = self._unshifted(yn, fed, ys[-1])
+                x = self._inject_y(x, yn)
             ys.append(yn)
         return torch.stack(ys, dim=1)
 

@@ -123,8 +123,11 @@ class RecurrentStepModel(StepModel):
         """Free run without packing the state each step (same operations as :meth:`_step_norm`)."""
         _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]) if x0 is None else x0)
         yn, ys, weights = yn0, [yn0], self._weights()
+        noisy_increments = bool(self.feedback_noise and self.training and self.config.increment)
         for un_k in un[:, :-1].unbind(1):
-            yn, hs, cs = self._cell_step(self._feedback(yn), un_k, hs, cs, weights)
+            fed = self._feedback(yn)
+            y_next, hs, cs = self._cell_step(fed, un_k, hs, cs, weights)
+            yn = self._unshifted(y_next, fed, yn) if noisy_increments else y_next
             ys.append(yn)
         return torch.stack(ys, dim=1)
 

@@ -96,10 +96,12 @@ class WindowStepModel(StepModel):
         else:
             samples = self._samples(x0)
         yn, ys = yn0, [yn0]
+        noisy_increments = bool(self.feedback_noise and self.training and self.config.increment)
         for un_k in un[:, :-1].unbind(1):
-            yn = self._feedback(yn)
-            window = torch.cat([samples, torch.cat([yn, un_k], dim=1)[:, None]], dim=1)
-            yn = self._skip(yn, self._predict_windows(self._relative(window)))
+            fed = self._feedback(yn)
+            window = torch.cat([samples, torch.cat([fed, un_k], dim=1)[:, None]], dim=1)
+            y_next = self._skip(fed, self._predict_windows(self._relative(window)))
+            yn = self._unshifted(y_next, fed, yn) if noisy_increments else y_next
             ys.append(yn)
             samples = window[:, 1:]
         return torch.stack(ys, dim=1)
