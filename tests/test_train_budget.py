@@ -48,5 +48,6 @@ def test_max_minutes_with_epochs_keeps_both_limits(data_dir, tmp_path):
     assert main(["train", "--data", str(data_dir), "--arch", "mlp", "--hidden", "4", "--truncate", "30",
                  "--max-minutes", "5", "--epochs", "2", "--quiet", "-o", str(out)]) == 0
     ckpt = load_checkpoint(out)
-    assert ckpt["train_config"]["epochs"] == 2 and ckpt["train_config"]["patience"] == 15
+    cfg = ckpt["train_config"]
+    assert cfg["epochs"] == 2 and cfg["max_minutes"] == 5 and cfg["patience"] > 0  # patience: the plan's, in steps
     assert ckpt["summary"]["stop_reason"] == "epochs"

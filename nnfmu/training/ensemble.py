@@ -33,7 +33,7 @@ from nnfmu.models import EnsembleStepModel, ModelConfig, StepModel, load_checkpo
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
-from nnfmu.training.trainer import _as_train_config, _prepare, train
+from nnfmu.training.trainer import _as_train_config, prepare_dataset, train
 
 KEEP = ("best", "ensemble")
 
@@ -108,20 +108,20 @@ def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> st
 
 
 def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
-               device="auto", threads: int | None = None) -> str:
+               device="auto", threads: int | None = None, linear=None) -> str:
     """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
     state = _member_state(path, model_config, cfg)
     if state == "finished":
         return "done"
     try:
         return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress,
-                     device=device, threads=threads).stop_reason
+                     device=device, threads=threads, linear=linear).stop_reason
     except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
         _error_file(path).write_text(f"{exc}\n")
         return "failed"
 
 
-def _train_in_processes(work: list, jobs: int, device, threads: int | None) -> None:
+def _train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None) -> None:
     """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
 
     Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard.
@@ -129,6 +129,7 @@ def _train_in_processes(work: list, jobs: int, device, threads: int | None) -> N
     with tempfile.TemporaryDirectory(prefix="nnfmu-seeds-") as tmp:
         data = Path(tmp) / "dataset"
         save_dataset(work[0][0], data)
+        extra = [] if linear is None else [str(linear.save(Path(tmp) / "linear.json"))]
         env = {**os.environ, "OMP_NUM_THREADS": "1"}
         pending, running, failed = list(work), [], []
         while pending or running:
@@ -136,7 +137,7 @@ def _train_in_processes(work: list, jobs: int, device, threads: int | None) -> N
                 _, model_config, cfg, path, _ = pending.pop(0)
                 args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
                         json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
-                        str(threads or 1)]
+                        str(threads or 1), *extra]
                 running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
                                                        stderr=subprocess.PIPE, text=True)))
             path, proc = running.pop(0)
@@ -158,7 +159,7 @@ def _jobs(jobs: int | None, k: int) -> int:
 
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
                 seeds: int = 3, keep: str = "ensemble", out: str | os.PathLike, jobs: int | None = None,
-                progress: bool = False, device="auto", threads: int | None = None) -> SeedsResult:
+                progress: bool = False, device="auto", threads: int | None = None, linear=None) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
 
     Parameters
@@ -178,8 +179,8 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
         Processes training at once (default: the cores this process may use, at most K).
     progress : bool
         Progress bars (only with ``jobs=1``).
-    device, threads :
-        As in :func:`train`, for every seed.
+    device, threads, linear :
+        As in :func:`train`, for every seed (a linear path's start is identified once, here, when not given).
     """
     if keep not in KEEP:
         raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
@@ -188,21 +189,25 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     if not isinstance(model_config, ModelConfig) or model_config.members != 1:
         raise ConfigError("train_seeds trains one network per seed: pass a ModelConfig with members=1")
     cfg = _as_train_config(train_config)
-    dataset, notes = _prepare(dataset, cfg)  # one validation split for every seed
+    dataset, notes = prepare_dataset(dataset, cfg)  # one validation split for every seed
     out = Path(out)
     seed_list = [cfg.seed + i for i in range(seeds)]
     paths = seed_paths(out, seed_list)
     paths[0].parent.mkdir(parents=True, exist_ok=True)
     work = [(dataset, model_config, cfg.replace(seed=s), p, progress and jobs == 1) for s, p in zip(seed_list, paths)]
+    if model_config.linear_order and linear is None:
+        from nnfmu.linear import LinearConfig, identify_linear
+
+        linear = identify_linear(dataset, LinearConfig(order=model_config.linear_order))
     n_jobs = _jobs(jobs, seeds)
     if n_jobs == 1:
         for item in work:
-            if _train_one(*item, device=device, threads=threads) in ("SIGINT", "SIGTERM"):
+            if _train_one(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
                 break
     else:
         for _, mc, c, path, _ in work:  # settings clashes are reported here, before any process starts
             _member_state(path, mc, c)
-        _train_in_processes(work, n_jobs, device, threads)
+        _train_in_processes(work, n_jobs, device, threads, linear)
     if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
         raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
                                 f"ones' checkpoints are in {paths[0].parent}: run the same call again to continue")
@@ -220,6 +225,27 @@ def _seed_row(seed: int, path: Path) -> dict:
             "error": _error_file(path).read_text().strip() if _error_file(path).exists() else None}
 
 
+def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list]:
+    """The ensemble of the seeds that improved on their start (best epoch > 0), its validation NRMSE, and notes.
+
+    A seed whose best epoch is 0 never trained: averaged in, its untrained output would pull the ensemble back
+    towards the start (a random network, or the linear model of a linear path). With fewer than two trained
+    seeds the best seed on validation is kept alone.
+    """
+    trained = [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0]
+    notes = [f"dropped seed {rows[i]['seed']} from the ensemble: it never improved on its start on validation "
+             f"(best epoch 0, validation NRMSE {rows[i]['best_valid_nrmse']:.4f})"
+             for i in range(len(rows)) if i not in trained]
+    if len(trained) < 2:
+        pool = trained or list(range(len(rows)))
+        best = min(pool, key=lambda i: rows[i]["best_valid_nrmse"])
+        notes.append(f"fewer than two seeds trained: kept seed {rows[best]['seed']} alone instead of an ensemble")
+        return models[best], rows[best]["best_valid_nrmse"], notes
+    model = EnsembleStepModel.from_members([models[i] for i in trained]).eval()
+    result = free_run_nrmse(model, valid, context=n)
+    return model, float("inf") if result is None else result.mean, notes
+
+
 def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,
           notes: list) -> SeedsResult:
     rows = [_seed_row(s, p) for s, p in zip(seed_list, paths)]
@@ -231,9 +257,8 @@ def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths:
         model, valid_nrmse = models[best], rows[best]["best_valid_nrmse"]
         notes = notes + [f"kept seed {rows[best]['seed']} (lowest validation NRMSE)"]
     else:
-        model = EnsembleStepModel.from_members(models).eval()
-        result = free_run_nrmse(model, valid, context=n)
-        valid_nrmse = float("inf") if result is None else result.mean
+        model, valid_nrmse, dropped = _ensemble_of_trained(models, rows, valid, n)
+        notes = notes + dropped
     test = free_run_nrmse(model, dataset.test, float64=True) if "test" in dataset.splits else None
     window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 and test is not None else None
     summary = {"best_valid_nrmse": valid_nrmse, "test_nrmse": None if test is None else test.mean,

@@ -1,4 +1,4 @@
-"""``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt DEVICE THREADS``: one seed.
+"""``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt DEVICE THREADS [LINEAR.json]``.
 
 One seed of :func:`nnfmu.training.train_seeds`.
 
@@ -14,15 +14,18 @@ import sys
 from pathlib import Path
 
 from nnfmu.data import load_dataset
+from nnfmu.linear import load_linear
 from nnfmu.models import ModelConfig
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.ensemble import _train_one
 
 
 def main(argv: list[str]) -> int:
-    data, model_json, train_json, out, device, threads = argv
+    data, model_json, train_json, out, device, threads, *linear = argv
+    start = load_linear(linear[0]) if linear else None  # the linear path's start (ModelConfig.linear_order > 0)
     _train_one(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
-               TrainConfig.from_dict(json.loads(train_json)), Path(out), False, device=device, threads=int(threads))
+               TrainConfig.from_dict(json.loads(train_json)), Path(out), False, device=device, threads=int(threads),
+               linear=start)
     return 0
 
 

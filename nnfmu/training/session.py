@@ -2,12 +2,16 @@
 
 One :class:`Session` holds the mutable training state (optimizer, best
 weights, early-stopping counter, history), so that it can be written to a
-checkpoint after every epoch and restored by ``resume``.
+checkpoint and restored by ``resume``. The file is written on an improvement
+(at most every :data:`SAVE_EVERY_S` seconds), at least every :data:`REFRESH_S`
+seconds, at the end, and on a signal or an error; each write holds the state at
+the end of the last finished epoch.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import math
 import signal
 import threading
@@ -43,6 +47,11 @@ def flush_denormals():
         yield
     finally:
         torch.set_flush_denormal(False)
+
+
+#: Seconds between checkpoint writes: an improvement waits at most this long, and any epoch at most REFRESH_S.
+SAVE_EVERY_S = 2.0
+REFRESH_S = 30.0
 
 
 class StopTraining(Exception):
@@ -95,6 +104,9 @@ class Session:
         self.bad_epochs = 0
         self.elapsed_before = 0.0
         self.started = time.monotonic()
+        self.snapshot: dict | None = None  # the resume state at the end of the last finished epoch
+        self.last_write = -math.inf
+        self.unsaved_improvement = False
 
     # ---- one epoch ---------------------------------------------------------------------------
     def train_epoch(self, stop: StopRequests, deadline: float | None) -> tuple[float, bool]:
@@ -166,7 +178,15 @@ class Session:
                  "best_valid_nrmse": self.best_score, "best_epoch": self.best_epoch, "improved": improved,
                  "seconds": seconds, "partial": partial}
         self.history.append(entry)
+        self.snapshot = copy.deepcopy(self.resume_state())  # what a write after a signal or an error holds
+        self.unsaved_improvement |= improved
         return entry
+
+    def save_due(self) -> bool:
+        """Whether the checkpoint should be written now: an improvement not written for :data:`SAVE_EVERY_S`,
+        or nothing written for :data:`REFRESH_S` (short epochs otherwise spent a third of a budget writing)."""
+        wait = SAVE_EVERY_S if self.unsaved_improvement else REFRESH_S
+        return time.monotonic() - self.last_write >= wait
 
     def patience_exhausted(self) -> bool:
         return self.cfg.patience > 0 and self.bad_epochs >= self.cfg.patience
@@ -197,9 +217,11 @@ class Session:
             self.average.load_state_dict(r["average"])
 
     def save(self, summary: dict | None = None) -> None:
+        """Write the checkpoint: the best weights, the history and the last finished epoch's resume state."""
         if self.out is None:
             return
         save_checkpoint(self.out, self.model, state_dict=self.best_state, train_config=self.cfg.to_dict(),
                         history=self.history, best_epoch=self.best_epoch,
                         summary={"best_valid_nrmse": self.best_score, "epochs_run": self.epoch, **(summary or {})},
-                        resume=self.resume_state())
+                        resume=self.snapshot if self.snapshot is not None else self.resume_state())
+        self.last_write, self.unsaved_improvement = time.monotonic(), False

@@ -40,6 +40,7 @@ from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import join_sequences, validation_trajectories
 from nnfmu.training.increments import prepare_increment
+from nnfmu.training.linear_start import start_linear_path
 from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
 from nnfmu.valid_range import training_range
@@ -106,7 +107,8 @@ def _jsonable(v):
     return str(v)
 
 
-def _prepare(dataset: Dataset, cfg: TrainConfig) -> tuple[Dataset, list]:
+def prepare_dataset(dataset: Dataset, cfg: TrainConfig) -> tuple[Dataset, list]:
+    """``dataset`` with a validation split (carved by ``cfg.valid_fraction`` and ``cfg.seed`` if it has none), notes."""
     if not isinstance(dataset, Dataset):
         raise ConfigError(f"expected an nnfmu.data.Dataset, got {type(dataset).__name__}; "
                           "load one with nnfmu.load_dataset(folder)")
@@ -118,7 +120,7 @@ def _prepare(dataset: Dataset, cfg: TrainConfig) -> tuple[Dataset, list]:
     return carved, [f"the dataset has no 'valid' split; validating on {how} (valid_fraction={cfg.valid_fraction})"]
 
 
-def _new_model(model_config, dataset: Dataset, cfg: TrainConfig) -> StepModel:
+def _new_model(model_config, dataset: Dataset, cfg: TrainConfig, linear=None) -> StepModel:
     if isinstance(model_config, StepModel):  # trained further as it is: its normalisation and meta are kept
         config = model_config.config
     else:
@@ -133,6 +135,8 @@ def _new_model(model_config, dataset: Dataset, cfg: TrainConfig) -> StepModel:
     torch.manual_seed(cfg.seed)
     model = build_model(config, dataset_meta(dataset, config.arch), norm=dataset.norm_stats("train"))
     prepare_increment(model, dataset.train)
+    if config.linear_order:
+        start_linear_path(model, dataset, linear)
     return model
 
 
@@ -165,6 +169,7 @@ def train(
     callback: Callback | None = None,
     device: str | torch.device | None = "auto",
     threads: int | None = None,
+    linear=None,
 ) -> TrainResult:
     """Train a step network in parallel or series-parallel mode; early stopping on validation free-run NRMSE.
 
@@ -179,7 +184,8 @@ def train(
     train_config : TrainConfig or dict, optional
         Defaults to ``TrainConfig()``; with ``resume`` and None, the checkpoint's.
     out : path, optional
-        Checkpoint file, rewritten atomically after every epoch (best weights + resume state).
+        Checkpoint file, rewritten atomically (best weights + resume state) on an improvement, at least every
+        30 s, at the end and on a signal or an error (:mod:`nnfmu.training.session`).
     resume : bool
         Continue the run stored in ``out``; with the same seed the result equals an uninterrupted run.
     progress : bool
@@ -192,6 +198,9 @@ def train(
     threads : int, optional
         Intra-op torch threads of this training (default one: the measured policy of
         :mod:`nnfmu.training.resources`); the caller's setting is restored afterwards.
+    linear : nnfmu.linear.LinearModel, optional
+        With ``model_config.linear_order = n_z > 0``: the linear model of ``n_z`` states the network starts
+        from (:mod:`nnfmu.models.linear_path`); None identifies one of that order on the training split.
 
     Raises
     ------
@@ -209,12 +218,12 @@ def train(
         if train_config is None and ckpt.get("train_config"):
             train_config = TrainConfig.from_dict(ckpt["train_config"])
     cfg = _as_train_config(train_config)
-    dataset, notes = _prepare(dataset, cfg)
+    dataset, notes = prepare_dataset(dataset, cfg)
     valid, valid_notes = validation_trajectories(dataset, cfg)
     notes += valid_notes
     dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
-        model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg)
+        model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg, linear)
         model = model.to(dtype)
         _check_device(model, device)
         seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
@@ -222,7 +231,11 @@ def train(
         session = Session(model, cfg, join_sequences(seqs) if cfg.join else seqs, valid, out)
         if ckpt:
             session.restore(ckpt)
-        stop_reason = _run(session, progress, callback)
+        try:
+            stop_reason = _run(session, progress, callback)
+        except BaseException:
+            _save_quietly(session)  # a diverged loss or a second Ctrl-C: the last finished epoch is kept
+            raise
         test = test_window = None
         if stop_reason not in ("SIGINT", "SIGTERM"):  # an interrupted run stops at once; the file is up to date
             best = copy.deepcopy(model).eval()
@@ -282,20 +295,31 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
             t0 = time.monotonic()  # an epoch always starts: at least one batch per call, even over budget
             loss, early = session.train_epoch(stop, deadline)
             if stop.reason:
-                return stop.reason  # the unfinished epoch is dropped; the file holds the last finished one
+                session.save()  # the unfinished epoch is dropped; the file holds the last finished one
+                return stop.reason
             session.epoch += 1
             entry = session.record(loss, session.validate(), time.monotonic() - t0, early)
-            session.save()
+            if session.save_due():
+                session.save()
             _show(bar, entry)
             advance(bar, session.epoch)
             if callback is not None:
                 try:
                     callback(session.epoch, dict(entry))
                 except StopTraining:
+                    session.save()
                     return "callback"
             if early:
                 return "time-budget"
         return "early-stopping" if session.patience_exhausted() else "epochs"
+
+
+def _save_quietly(session: Session) -> None:
+    """Write the checkpoint on the way out of an error; a failure to write must not hide the error itself."""
+    try:
+        session.save()
+    except Exception:  # noqa: BLE001 - the original error is raised by the caller
+        pass
 
 
 def _show(bar, entry: dict) -> None:

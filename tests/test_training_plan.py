@@ -1,0 +1,109 @@
+"""Training that fits the data by default (issue 21): the plan's choices, the ensemble's guard against seeds that
+never trained, feedback noise that does not integrate in increment mode, and checkpoints written on improvement."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from nnfmu.data import from_arrays
+from nnfmu.models import ModelConfig, build_model
+from nnfmu.training import TrainConfig, train
+from nnfmu.training import ensemble as seeds_module
+from nnfmu.training.plan import MAX_WINDOW, plan_training, still_improving, valid_fraction
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+def one_record(n: int = 4000, test: int = 1000):
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(n + test, 1))
+    y = np.cumsum(u, axis=0) * 0.01  # an integrator
+    return from_arrays(Ts=0.1, u_train=[u[:n]], y_train=[y[:n]], u_test=[u[n:]], y_test=[y[n:]])
+
+
+class _Integrator:
+    """What the plan reads of a linear model: its A (a pole at 1, an integrating plant)."""
+    n_x = 1
+
+    class system:
+        A = np.array([[1.0]])
+
+
+def test_one_long_record_gets_windows_many_steps_and_a_test_like_validation_tail():
+    ds = one_record(10000, 2000)
+    plan = plan_training(ds, {}, linear=_Integrator())
+    c = plan.changes
+    assert c["truncate"] == MAX_WINDOW  # an integrating mode: the longest windows
+    assert c["valid_fraction"] == pytest.approx(0.2)  # min(test length 2000, 25 %) of 10000 samples
+    assert c["batch_size"] == 1 and c["epochs"] >= 500  # 4 windows an epoch: thousands of optimiser steps
+    assert any("windows: --truncate" in line for line in plan.lines)
+
+
+def test_the_init_window_is_counted_into_the_validation_tail():
+    ds = one_record()
+    assert valid_fraction(ds, init_window=201) == pytest.approx(valid_fraction(ds) + 200 / 4000)
+
+
+def test_what_the_user_gives_is_kept_as_given():
+    plan = plan_training(one_record(), {"truncate": 100, "batch_size": 7, "epochs": 5, "patience": 2,
+                                        "valid_fraction": 0.1})
+    assert plan.changes == {}
+
+
+def test_still_improving_is_said_only_when_the_best_epoch_is_at_the_end():
+    history = [{"epoch": k} for k in range(101)]
+    assert still_improving(history, 97, "epochs") and not still_improving(history, 50, "epochs")
+    assert not still_improving(history, 100, "early-stopping")
+
+
+def test_an_ensemble_drops_a_seed_that_never_trained_and_says_so():
+    config = ModelConfig(arch="mlp", n_u=1, n_y=1, hidden=4)
+    models = [build_model(config).eval() for _ in range(3)]
+    rows = [{"seed": s, "best_epoch": e, "best_valid_nrmse": v} for s, e, v in ((0, 4, 0.5), (1, 0, 0.9), (2, 7, 0.6))]
+    ds = one_record(200, 50)
+    model, _, notes = seeds_module._ensemble_of_trained(models, rows, ds.test, 1)
+    assert len(model.members) == 2 and torch.equal(model.members[1].net[0].weight, models[2].net[0].weight)
+    assert any("dropped seed 1" in n and "never improved" in n for n in notes)
+    alone, valid, notes = seeds_module._ensemble_of_trained(models, [dict(r, best_epoch=0) for r in rows], ds.test, 1)
+    assert alone is models[0] and valid == 0.5 and any("kept seed 0 alone" in n for n in notes)
+
+
+@pytest.mark.parametrize("arch", ("gru", "mlp", "tcn"))
+def test_feedback_noise_does_not_integrate_in_increment_mode(arch):
+    """A network that predicts no increment must hold its output in a noisy training free run, not random-walk."""
+    model = build_model(ModelConfig(arch=arch, n_u=1, n_y=1, hidden=4, increment=True)).double().train()
+    with torch.no_grad():
+        for p in model.parameters():
+            p.zero_()
+    model.feedback_noise = 0.5
+    yn = model.rollout_normalised(torch.zeros(3, 400, 1, dtype=torch.float64), torch.ones(3, 1, dtype=torch.float64))
+    assert torch.allclose(yn, torch.ones_like(yn))
+
+
+def test_increment_mode_with_feedback_noise_trains_below_its_start_on_the_slider():
+    from nnfmu.physics import generate_dataset
+
+    ds = generate_dataset("slider", size="small", seed=0)
+    result = train(ds, ModelConfig(arch="gru", n_u=1, n_y=1, hidden=16, increment=True),
+                   TrainConfig(epochs=6, patience=0, truncate=200, batch_size=8, feedback_noise=0.1))
+    assert result.best_epoch > 0 and result.best_valid_nrmse < result.history[0]["valid_nrmse"]
+    assert all(np.isfinite(h["train_loss"]) and h["train_loss"] < 5.0 for h in result.history[1:])
+
+
+def test_short_epochs_write_the_checkpoint_on_improvement_not_after_every_epoch(tmp_path, monkeypatch):
+    from nnfmu.training import session
+
+    writes = []
+    real = session.save_checkpoint
+    monkeypatch.setattr(session, "save_checkpoint", lambda *a, **k: (writes.append(1), real(*a, **k)))
+    monkeypatch.setattr(session, "SAVE_EVERY_S", 3600.0)  # an improvement waits: only the first epoch and the end
+    ds = one_record(300, 100)
+    result = train(ds, ModelConfig(arch="mlp", n_u=1, n_y=1, hidden=4), TrainConfig(epochs=12, patience=0),
+                   out=tmp_path / "m.pt")
+    assert len(writes) <= 3 < len(result.history)
+    from nnfmu.models import load_checkpoint
+
+    ckpt = load_checkpoint(tmp_path / "m.pt")
+    assert ckpt["resume"]["epoch"] == 12 and ckpt["best_epoch"] == result.best_epoch
