@@ -11,13 +11,16 @@ operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`:
     ys = rollout(un, yn0)                    # (B, T, n_u), (B, n_y) -> (B, T, n_y), as model.rollout_normalised
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
-It applies to a :class:`RecurrentStepModel` on the CPU in float32 or float64, with no
-active dropout or feedback noise (eval mode, or both zero), no init window and no increment mode. The library is compiled at first use with
+It applies to a :class:`RecurrentStepModel`, and to a
+:class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
+state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
+the CPU in float32 or float64, with no active dropout or feedback noise (eval mode, or both zero),
+no init window and no increment mode. The library is compiled at first use with
 the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
 like the compiled physics (``$NNFMU_CACHE_DIR``). Without a compiler, or if compiling
 fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
 (slower, same numbers). ``NNFMU_COMPILED_ROLLOUT=0`` turns the C path off.
-Values and gradients equal torch's to rounding (tested in float64 to 1e-12).
+Values and gradients equal torch's to rounding (tested in float64 to 1e-12, with and without a linear path).
 """
 
 from __future__ import annotations
@@ -35,21 +38,23 @@ import torch
 
 from nnfmu.errors import FmuBuildError, SimulationError
 from nnfmu.models.base import StepModel
+from nnfmu.models.linear_path import LinearPathStepModel
 from nnfmu.models.recurrent import RecurrentStepModel
 
 _SOURCE = Path(__file__).with_name("rollout.c")
 _FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
 _CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}
 _REALS = {torch.float32: "float", torch.float64: "double"}
+_FIXED = ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d")  # the linear path's fixed model, in rollout.c's order
 ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
 
 
 def compiled_rollout(model: StepModel):
     """``rollout(un, yn0) -> ys`` by the compiled free run, or None where it does not apply.
 
-    Applies to a :class:`RecurrentStepModel` whose weights are CPU float32/float64 tensors,
-    without an init window or increment mode, and whose dropout and feedback noise are inactive
-    (eval mode, or zero); None otherwise, and None with a
+    Applies to a :class:`RecurrentStepModel`, or a :class:`LinearPathStepModel` on one, whose weights
+    (and buffers of the path) are CPU float32/float64 tensors, without an init window or increment mode,
+    and whose dropout and feedback noise are inactive (eval mode, or zero); None otherwise, and None with a
     one-time RuntimeWarning when the library cannot be compiled.
     """
     if not _applies(model):
@@ -83,15 +88,18 @@ def free_run_forward(model: StepModel, u: torch.Tensor, y0: torch.Tensor) -> tor
 
 
 def _applies(model: StepModel) -> bool:
-    if os.environ.get(ENV_SWITCH, "1") == "0" or type(model) is not RecurrentStepModel:
+    if os.environ.get(ENV_SWITCH, "1") == "0":
         return False
-    c = model.config
-    if c.init_window > 1 or c.increment:  # the encoder's initial state and the increment readout are torch's only
+    net = model.net if type(model) is LinearPathStepModel else model
+    if type(net) is not RecurrentStepModel:
         return False
-    dtype = model.readout.weight.dtype
-    if dtype not in _REALS or any(p.device.type != "cpu" or p.dtype != dtype for p in model.parameters()):
+    if any(c.init_window > 1 or c.increment for c in (model.config, net.config)):
+        return False  # the encoder's initial state and the increment readout are torch's only
+    dtype = net.readout.weight.dtype
+    tensors = [*model.parameters(), *(getattr(model, name) for name in _FIXED if net is not model)]
+    if dtype not in _REALS or any(t.device.type != "cpu" or t.dtype != dtype for t in tensors):
         return False
-    return not (model.training and (c.dropout > 0 or model.feedback_noise))
+    return not (model.training and (net.config.dropout > 0 or model.feedback_noise))
 
 
 def _cell(model: RecurrentStepModel) -> int:
@@ -106,8 +114,12 @@ def _weights(model: RecurrentStepModel) -> list[torch.Tensor]:
     return out + [model.readout.weight, model.readout.bias]
 
 
-def _apply(model: RecurrentStepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-    return _Rollout.apply(model, library, un, yn0, *_weights(model))
+def _apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+    if type(model) is not LinearPathStepModel:
+        return _Rollout.apply(model, None, library, un, yn0, None, *_weights(model))
+    fixed = [getattr(model, name).detach().contiguous() for name in _FIXED]
+    z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
+    return _Rollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
 
 
 def _pointers(tensors) -> ctypes.Array:
@@ -120,43 +132,57 @@ def _header(model: RecurrentStepModel, B: int, T: int) -> tuple:
 
 
 class _Rollout(torch.autograd.Function):
-    """Forward: ``nnfmu_rollout_forward``. Backward: ``nnfmu_rollout_backward``. Time-major inside."""
+    """Forward: ``nnfmu_rollout_forward``. Backward: ``nnfmu_rollout_backward``. Time-major inside.
+
+    ``model``: the recurrent network; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z)
+    its initial state, and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None.
+    """
 
     @staticmethod
-    def forward(ctx, model, library, un, yn0, *weights):
+    def forward(ctx, model, fixed, library, un, yn0, z0, *weights):
         B, T, _ = un.shape
         c, dtype = model.config, weights[0].dtype
         un_t = un.detach().to(dtype).transpose(0, 1).contiguous()
         yn0 = yn0.detach().to(dtype).contiguous()
+        z0 = None if z0 is None else z0.detach().to(dtype).contiguous()
         ys_t = un_t.new_empty(T, B, c.n_y)
-        keep = any(ctx.needs_input_grad[2:])
+        keep = any(ctx.needs_input_grad[3:])
         shape = (T, c.layers, B, c.hidden)
         hs = un_t.new_empty(shape) if keep else None
         cs = un_t.new_empty(shape) if keep and c.arch == "lstm" else None
         width = library.nnfmu_rollout_saved_width(_cell(model), c.hidden)
         saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
+        ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None
         status = library.nnfmu_rollout_forward(*_header(model, B, T), _pointers(weights), _ptr(un_t), _ptr(yn0),
-                                               _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved))
+                                               _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved), *_path(fixed),
+                                               _ptr(z0), _ptr(ns))
         _check(status, "free run", B, T)
         if keep:
-            ctx.model, ctx.library = model, library
-            ctx.save_for_backward(un_t, ys_t, hs, cs, saved, *weights)
+            ctx.model, ctx.library, ctx.fixed = model, library, fixed
+            ctx.save_for_backward(un_t, ys_t, hs, cs, saved, ns, *weights)
         return ys_t.transpose(0, 1).to(un.dtype)
 
     @staticmethod
     def backward(ctx, gys):
-        un_t, ys_t, hs, cs, saved, *weights = ctx.saved_tensors
+        un_t, ys_t, hs, cs, saved, ns, *weights = ctx.saved_tensors
         T, B, _ = un_t.shape
         grads = [torch.zeros_like(w) for w in weights]
         gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
         gyn0 = gys_t.new_empty(gys_t.shape[1:])
+        gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
         status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), _pointers(weights), _ptr(un_t),
                                                     _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved), _ptr(gys_t),
-                                                    _pointers(grads), _ptr(gyn0))
+                                                    _pointers(grads), _ptr(gyn0), *_path(ctx.fixed), _ptr(ns),
+                                                    _ptr(gz0))
         _check(status, "back-propagation through the free run", B, T)
         needed = ctx.needs_input_grad
-        return (None, None, None, gyn0 if needed[3] else None,
-                *(g if need else None for g, need in zip(grads, needed[4:])))
+        return (None, None, None, None, gyn0 if needed[4] else None, gz0 if needed[5] else None,
+                *(g if need else None for g, need in zip(grads, needed[6:])))
+
+
+def _path(fixed) -> tuple:
+    """The linear path's ``n_z, lin`` arguments of rollout.c (``0, NULL`` without a path)."""
+    return (0, None) if fixed is None else (fixed[0].shape[0], _pointers(fixed))
 
 
 def _ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
@@ -201,8 +227,9 @@ def _library(dtype: torch.dtype) -> ctypes.CDLL:
                 run_compiler([*flags, str(c_file), "-o", str(built), "-lm"], what=what)
             os.replace(built, target)  # atomic: a parallel run never loads a half-written library
     lib = ctypes.CDLL(str(target))
-    lib.nnfmu_rollout_forward.argtypes = [ctypes.c_int] * 8 + [ctypes.c_double] + [ctypes.c_void_p] * 7
-    lib.nnfmu_rollout_backward.argtypes = [ctypes.c_int] * 8 + [ctypes.c_double] + [ctypes.c_void_p] * 9
+    header, path = [ctypes.c_int] * 8 + [ctypes.c_double], [ctypes.c_int] + [ctypes.c_void_p] * 3
+    lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path
+    lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 9 + path
     lib.nnfmu_rollout_saved_width.argtypes = [ctypes.c_int, ctypes.c_int]
     for entry in (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width):
         entry.restype = ctypes.c_int

@@ -8,16 +8,25 @@
  *     x_k = [y_k, u_k];  h^l_{k+1} = cell_l(input^l, h^l_k);  input^0 = x_k, input^l = h^{l-1}_{k+1}
  *     y_{k+1} = y_k + skip_scale * (W_o h^{L-1}_{k+1} + b_o)   (skip)   or   W_o h^{L-1}_{k+1} + b_o
  *
+ * With a linear path of n_z > 0 states (LinearPathStepModel, nnfmu/models/linear_path.py) the readout above
+ * is the network's raw output n_k, and the output is that of a fixed linear model plus a learned correction:
+ *
+ *     z_{k+1} = A z_k + B u_k + b + G n_k;   y_{k+1} = C z_{k+1} + d + alpha * n_k   (z_0 given)
+ *
+ * A (n_z, n_z), B (n_z, n_u), b (n_z), C (n_y, n_z), d (n_y) are held fixed; G (n_z, n_y) and alpha (n_y) are
+ * trained. The cells see y_k, the total output, as without the path.
+ *
  * Why C: torch runs each step as 15-20 small operations (and as many autograd nodes), whose fixed
  * cost of a few microseconds each, not arithmetic, bounds training throughput at the batch sizes
  * used here. One call runs the whole rollout, one call its whole backward pass.
  *
  * Layout: time-major. un (T, B, n_u), yn0 (B, n_y), ys (T, B, n_y) with ys[0] = yn0.
  * Parameters, in torch's layout, per layer: W_ih (G H, n_in), W_hh (G H, H), b_ih (G H), b_hh (G H);
- * then W_o (n_y, H), b_o (n_y). G = 1 (RNN), 4 (LSTM: i, f, g, o), 3 (GRU: r, z, n).
+ * then W_o (n_y, H), b_o (n_y); with a linear path then G (n_z, n_y), alpha (n_y). The path's fixed matrices
+ * come separately, lin = {A, B, b, C, d}, row-major. G = 1 (RNN), 4 (LSTM: i, f, g, o), 3 (GRU: r, z, n).
  * For the backward pass the forward pass stores h (and c for the LSTM) of every layer and step,
  * (T, L, B, H), and the activated gates, (T - 1, L, B, S) with S = saved_width(): what torch's autograd
- * keeps too, in less memory.
+ * keeps too, in less memory; with a linear path also the raw outputs n_k, (T - 1, B, n_y).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -237,17 +246,27 @@ static void readout(const shape_t *s, const real *Wo, const real *bo, const real
   }
 }
 
+/* The linear path's step: z_next = A z + B u + b + G n, y_next = C z_next + d + alpha * n. */
+static void path_forward(int n_z, int n_u, int n_y, const real **lin, const real *G, const real *alpha,
+                         const real *z, const real *u, const real *n, real *restrict z_next, real *restrict y_next) {
+  for (int i = 0; i < n_z; ++i)
+    z_next[i] = lin[2][i] + dot(n_z, lin[0] + (long)i * n_z, z) + dot(n_u, lin[1] + (long)i * n_u, u) +
+                dot(n_y, G + (long)i * n_y, n);
+  for (int o = 0; o < n_y; ++o) y_next[o] = lin[4][o] + dot(n_z, lin[3] + (long)o * n_z, z_next) + alpha[o] * n[o];
+}
+
 static shape_t make_shape(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip) {
   shape_t s = {cell, B, T, n_u, n_y, H, L, gates(cell), has_skip, (real)skip};
   return s;
 }
 
-/* The free run. hs, cs (T, L, B, H) and saved (T - 1, L, B, S) receive what the backward pass needs; with
- * hs == NULL only two steps are kept (inference). cs is used by the LSTM only. Returns 0, or -1 when
- * memory runs out. */
+/* The free run. hs, cs (T, L, B, H), saved (T - 1, L, B, S) and ns (T - 1, B, n_y) receive what the backward
+ * pass needs; with hs == NULL only two steps are kept (inference). cs is used by the LSTM only. n_z > 0: the
+ * linear path (lin, z0 (B, n_z); ns may be NULL for inference); n_z = 0: lin, z0 and ns are unused.
+ * Returns 0, or -1 when memory runs out. */
 int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
                           const real **params, const real *un, const real *yn0, real *ys, real *hs, real *cs,
-                          real *saved) {
+                          real *saved, int n_z, const real **lin, const real *z0, real *ns) {
   const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
   const long LBH = (long)L * B * H;
   const int n0 = n_y + n_u, GH = s.G * H, S = nnfmu_rollout_saved_width(cell, H);
@@ -255,8 +274,11 @@ int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L
   real *gi = malloc(sizeof(real) * GH), *gh = malloc(sizeof(real) * GH), *x = malloc(sizeof(real) * n0);
   real *ring_h = hs ? NULL : calloc((size_t)2 * LBH, sizeof(real));
   real *ring_c = (hs || cell != LSTM) ? NULL : calloc((size_t)2 * LBH, sizeof(real));
-  const int ok = layers && gi && gh && x && (hs || ring_h) && (hs || cell != LSTM || ring_c);
+  real *ring_z = n_z ? malloc(sizeof(real) * 2 * B * n_z) : NULL, *n_tmp = n_z ? malloc(sizeof(real) * n_y) : NULL;
+  const int ok = layers && gi && gh && x && (hs || ring_h) && (hs || cell != LSTM || ring_c) &&
+                 (!n_z || (ring_z && n_tmp));
   if (ok) {
+    if (n_z) memcpy(ring_z, z0, sizeof(real) * (size_t)B * n_z);
     real *h_all = hs ? hs : ring_h, *c_all = hs ? cs : ring_c;
     memset(h_all, 0, sizeof(real) * LBH);
     if (cell == LSTM) memset(c_all, 0, sizeof(real) * LBH);
@@ -276,11 +298,20 @@ int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L
           if (saved && cell == GRU) memcpy(gates_out + 3 * H, gh + 2 * H, sizeof(real) * H);
           in = h_all + next + at;
         }
-        readout(&s, params[4 * L], params[4 * L + 1], in, y, ys + ((long)(k + 1) * B + b) * n_y);
+        real *y_next = ys + ((long)(k + 1) * B + b) * n_y;
+        if (!n_z) {
+          readout(&s, params[4 * L], params[4 * L + 1], in, y, y_next);
+          continue;
+        }
+        real *n = ns ? ns + ((long)k * B + b) * n_y : n_tmp;
+        const real *z = ring_z + ((long)(k & 1) * B + b) * n_z;
+        readout(&s, params[4 * L], params[4 * L + 1], in, y, n);
+        path_forward(n_z, n_u, n_y, lin, params[4 * L + 2], params[4 * L + 3], z, x + n_y, n,
+                     ring_z + ((long)((k + 1) & 1) * B + b) * n_z, y_next);
       }
     }
   }
-  free_layers(layers, L); free(gi); free(gh); free(x); free(ring_h); free(ring_c);
+  free_layers(layers, L); free(gi); free(gh); free(x); free(ring_h); free(ring_c); free(ring_z); free(n_tmp);
   return ok ? 0 : -1;
 }
 
@@ -309,13 +340,41 @@ static void outer_sum(int B, int n, int m, const real *restrict a, long lda, con
   }
 }
 
+/* The linear path backwards for one sample: gy = dL/dy_{k+1} in full, cz = dL/dz_{k+1} through the later steps
+ * on entry and dL/dz_k on exit; dn receives dL/dn_k; the gradients of G and alpha are added to gG, galpha. */
+static void path_backward(int n_z, int n_y, const real **lin, const real *G, const real *alpha, const real *n,
+                          const real *gy, real *restrict cz, real *restrict gz, real *restrict dn, real *gG,
+                          real *galpha) {
+  const real *A = lin[0], *C = lin[3];
+  for (int i = 0; i < n_z; ++i) {  /* dL/dz_{k+1} = carried + C^T gy */
+    real acc = cz[i];
+    for (int o = 0; o < n_y; ++o) acc += C[(long)o * n_z + i] * gy[o];
+    gz[i] = acc;
+  }
+  for (int o = 0; o < n_y; ++o) {  /* dL/dn_k = alpha gy + G^T gz */
+    real acc = alpha[o] * gy[o];
+    for (int i = 0; i < n_z; ++i) acc += G[(long)i * n_y + o] * gz[i];
+    dn[o] = acc;
+    galpha[o] += gy[o] * n[o];
+  }
+  for (int i = 0; i < n_z; ++i)
+    for (int o = 0; o < n_y; ++o) gG[(long)i * n_y + o] += gz[i] * n[o];
+  for (int j = 0; j < n_z; ++j) {  /* dL/dz_k = A^T gz */
+    real acc = 0;
+    for (int i = 0; i < n_z; ++i) acc += A[(long)i * n_z + j] * gz[i];
+    cz[j] = acc;
+  }
+}
+
 /* Back-propagation through the free run. gys (T, B, n_y): dL/dys. grads: same layout as params, added to
- * (zero them first). gyn0 (B, n_y) receives dL/dyn0. un, ys, hs, cs, saved as left by the forward pass.
+ * (zero them first). gyn0 (B, n_y) receives dL/dyn0, gz0 (B, n_z) dL/dz0 (linear path; unused for n_z = 0).
+ * un, ys, hs, cs, saved, ns as left by the forward pass.
  * Each step runs layer by layer over the whole batch, so that the weight gradients of a step are sums
  * over the batch (outer_sum) instead of B separate updates. */
 int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
                            const real **params, const real *un, const real *ys, const real *hs, const real *cs,
-                           const real *saved, const real *gys, real **grads, real *gyn0) {
+                           const real *saved, const real *gys, real **grads, real *gyn0, int n_z, const real **lin,
+                           const real *ns, real *gz0) {
   const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
   const long LBH = (long)L * B * H, BH = (long)B * H;
   const int n0 = n_y + n_u, GH = s.G * H, n_max = n0 > H ? n0 : H, S = nnfmu_rollout_saved_width(cell, H);
@@ -328,14 +387,21 @@ int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int 
   real *dh = malloc(sizeof(real) * BH), *din = malloc(sizeof(real) * n_max * B);      /* (B, H), (B, n_in) */
   real *x = malloc(sizeof(real) * n0 * B), *go = malloc(sizeof(real) * n_y * B);
   real *dc_next = calloc((size_t)H, sizeof(real));
-  const int ok = layers && carry_y && carry_h && carry_c && dgi && dgh && dh && din && x && go && dc_next;
+  real *carry_z = n_z ? calloc((size_t)B * n_z, sizeof(real)) : NULL;  /* dL/dz_{k+1} through the later steps */
+  real *gz = n_z ? malloc(sizeof(real) * n_z) : NULL, *dn_path = n_z ? malloc(sizeof(real) * B * n_y) : NULL;
+  real *dn = n_z ? dn_path : carry_y;  /* dL/dn_k (B, n_y): without the path, dL/dy_{k+1} */
+  const int ok = layers && carry_y && carry_h && carry_c && dgi && dgh && dh && din && x && go && dc_next &&
+                 (!n_z || (carry_z && gz && dn_path));
   for (int k = T - 2; ok && k >= 0; --k) {
     const real *h_top = hs + (long)(k + 1) * LBH + (long)(L - 1) * BH;
     for (int b = 0; b < B; ++b) {  /* the readout: y_{k+1} = [y_k +] skip * (W_o h + b_o) */
-      real *g = go + (long)b * n_y, *cy = carry_y + (long)b * n_y;
+      real *g = go + (long)b * n_y, *cy = carry_y + (long)b * n_y, *dnb = dn + (long)b * n_y;
+      for (int o = 0; o < n_y; ++o) cy[o] += gys[((long)(k + 1) * B + b) * n_y + o];  /* now the whole dL/dy_{k+1} */
+      if (n_z)
+        path_backward(n_z, n_y, lin, params[4 * L + 2], params[4 * L + 3], ns + ((long)k * B + b) * n_y, cy,
+                      carry_z + (long)b * n_z, gz, dnb, grads[4 * L + 2], grads[4 * L + 3]);
       for (int o = 0; o < n_y; ++o) {
-        cy[o] += gys[((long)(k + 1) * B + b) * n_y + o];      /* now the whole dL/dy_{k+1} */
-        g[o] = has_skip ? s.skip * cy[o] : cy[o];
+        g[o] = has_skip ? s.skip * dnb[o] : dnb[o];
         grads[4 * L + 1][o] += g[o];
       }
       memcpy(dh + (long)b * H, carry_h + (long)(L - 1) * BH + (long)b * H, sizeof(real) * H);
@@ -371,10 +437,11 @@ int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int 
     }
     for (int b = 0; b < B; ++b)
       for (int o = 0; o < n_y; ++o)
-        carry_y[(long)b * n_y + o] = din[(long)b * n_max + o] + (has_skip ? carry_y[(long)b * n_y + o] : 0);
+        carry_y[(long)b * n_y + o] = din[(long)b * n_max + o] + (has_skip ? dn[(long)b * n_y + o] : 0);
   }
   if (ok) {
     for (long i = 0; i < (long)B * n_y; ++i) gyn0[i] = gys[i] + carry_y[i];
+    if (n_z) memcpy(gz0, carry_z, sizeof(real) * (size_t)B * n_z);
     for (int l = 0; l < L; ++l) {
       const layer_t *ly = layers + l;
       real *g_ih = grads[4 * l], *g_hh = grads[4 * l + 1];
@@ -385,6 +452,6 @@ int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int 
     }
   }
   free_layers(layers, L); free(carry_y); free(carry_h); free(carry_c); free(dgi); free(dgh);
-  free(dh); free(din); free(x); free(go); free(dc_next);
+  free(dh); free(din); free(x); free(go); free(dc_next); free(carry_z); free(gz); free(dn_path);
   return ok ? 0 : -1;
 }
