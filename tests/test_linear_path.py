@@ -11,7 +11,7 @@ from nnfmu.errors import ConfigError
 from nnfmu.export import casadi_model
 from nnfmu.linear import identify_linear
 from nnfmu.models import ModelConfig, build_model, load_model
-from nnfmu.training import TrainConfig, train
+from nnfmu.training import TrainConfig, dataset_meta, train
 from nnfmu.training.linear_start import start_linear_path
 from tests.test_linear import dataset, true_system
 
@@ -31,7 +31,7 @@ def linear(data):
 
 def path_model(arch, data, linear, **options):
     config = ModelConfig(arch=arch, n_u=data.n_u, n_y=data.n_y, hidden=8, linear_order=linear.n_x, **options)
-    model = build_model(config, norm=data.norm_stats("train")).double()
+    model = build_model(config, dataset_meta(data, arch), norm=data.norm_stats("train")).double()
     start_linear_path(model, data, linear)
     return model
 
@@ -80,3 +80,16 @@ def test_linear_path_refuses_increment_mode_and_another_order(data, linear):
     model = build_model(ModelConfig(arch="gru", n_u=2, n_y=2, linear_order=linear.n_x + 1))
     with pytest.raises(ConfigError, match="linear_order"):
         start_linear_path(model, data, linear)
+
+
+def test_the_fmu_of_an_untrained_path_simulates_the_linear_model(data, linear, tmp_path):
+    """Issue 21's check: the correction at zero reproduces the linear model's free run, and so does its FMU (fmpy)."""
+    from nnfmu.cosim import FmuSimulator
+    from nnfmu.export import build_fmu
+
+    model = path_model("gru", data, linear)
+    fmu = build_fmu(casadi_model(model, name="gru_on_linear"), tmp_path / "m.fmu")
+    u, y = data.test.u[0], data.test.y[0]
+    with FmuSimulator(fmu, data.input_names, data.output_names, data.Ts) as sim:
+        got = sim.simulate(u, y[0])
+    assert rel(got, linear.simulate(u, y[0])) < 1e-9

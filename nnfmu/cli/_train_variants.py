@@ -14,7 +14,7 @@ def print_test(ds, test, test_window, n: int) -> None:
               f"scored from sample {n})")
 
 
-def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
+def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None) -> int:
     """``--seeds K``: :func:`nnfmu.training.train_seeds`, with every seed's scores and their spread printed."""
     from nnfmu.training import train_seeds
 
@@ -24,7 +24,8 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
     result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
-                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads)
+                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads,
+                         linear=linear)
     for note in result.notes:
         print(f"note: {note}")
     for r in result.seeds:

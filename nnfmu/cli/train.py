@@ -18,6 +18,8 @@ from __future__ import annotations
 import argparse
 
 from nnfmu.cli._resources import add_resource_options, check_resource_options
+from nnfmu.cli._train_plan import prepare as prepare_defaults
+from nnfmu.cli._train_plan import report_end
 from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
 from nnfmu.limits import UNBOUNDED_EPOCHS
 
@@ -107,6 +109,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "increments, inputs relative to the newest output. 'auto' trains the network both ways "
                         "(into <out stem>.residual.pt and .increment.pt) and keeps the one with the lower "
                         "validation NRMSE")
+    p.add_argument("--linear-path", choices=["auto", "off"], default="auto",
+                   help="auto (default): identify the linear baseline first and train the network as a correction "
+                        "to it, starting at zero, so training starts at the linear model's error and the kept "
+                        "weights are never worse on validation; off: the network alone. Windows, batch, budget "
+                        "and validation tail left out are chosen from the data and printed")
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
@@ -224,14 +231,18 @@ def _run(args: argparse.Namespace) -> int:
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    linear = None
+    if stored is None:
+        given = {**_given(args, _TRAIN_OPTIONS), **({"join": True} if args.join else {})}
+        ds, model_config, train_config, linear = prepare_defaults(args, ds, model_config, train_config, given)
     if args.increment == "auto":
         return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
     if args.seeds is not None:
-        return run_seeds(args, ds, model_config, train_config, out, device)
-    return _run_one(args, ds, model_config, train_config, out, device)
+        return run_seeds(args, ds, model_config, train_config, out, device, linear=linear)
+    return _run_one(args, ds, model_config, train_config, out, device, linear=linear)
 
 
-def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device) -> int:
+def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None) -> int:
     """One training into ``out`` (or its resumption), with the summary printed."""
     import signal
 
@@ -240,7 +251,7 @@ def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, devi
 
     try:
         result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
-                       device=device, threads=args.threads)
+                       device=device, threads=args.threads, linear=linear)
     except BaseException:
         if not args.resume:  # a failed command leaves nothing at --out unless an epoch finished
             remove_if_untrained(out)
@@ -258,6 +269,7 @@ def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, devi
         return status
     print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, "
           f"validation free-run NRMSE {result.best_valid_nrmse:.4f}; checkpoint {out}")
+    report_end(result, linear)
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0

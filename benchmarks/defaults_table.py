@@ -1,0 +1,79 @@
+"""Issue 21's proof: every network at its defaults against the linear baseline, scored in fmpy.
+
+For each dataset folder and architecture this runs exactly what a new user types, with no flag beyond
+``--data`` and ``-o`` (plus ``--quiet``)::
+
+    nnfmu linear --data D -o linear.fmu
+    nnfmu train  --data D --arch A -o A.pt         # then: nnfmu export A.pt -o A.fmu
+    nnfmu evaluate --data D linear.fmu A.fmu ... --json scores.json
+
+and prints one table: the test NRMSE (free run in fmpy) of the linear model and of each network, its
+ratio to the linear model, and the CPU seconds (user + system, of the command and its children) of each
+cell. ``--max-minutes N`` adds that flag to every training (the time-budget row of the issue). Pin it to
+one core on a shared machine (``taskset -c 1``) and name the CPU next to the figures. Not part of the tests.
+
+    python benchmarks/defaults_table.py data/slider data/valve --archs gru mlp --work /tmp/defaults
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+
+def _cpu() -> float:
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return kids.ru_utime + kids.ru_stime
+
+
+def _nnfmu(*args: str) -> float:
+    """Run one nnfmu command; its CPU seconds."""
+    before = _cpu()
+    done = subprocess.run([sys.executable, "-m", "nnfmu", *args], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"nnfmu {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()[-2000:]}")
+    return _cpu() - before
+
+
+def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str]) -> dict:
+    """Train, export and score every cell of one dataset; returns {name: (test NRMSE, CPU s)}."""
+    work.mkdir(parents=True, exist_ok=True)
+    fmus, cpu = {}, {}
+    fmus["linear"] = work / "linear.fmu"
+    cpu["linear"] = _nnfmu("linear", "--data", str(data), "-o", str(fmus["linear"]), "--quiet")
+    for arch in archs:
+        ckpt = work / f"{arch}.pt"
+        ckpt.unlink(missing_ok=True)
+        cpu[arch] = _nnfmu("train", "--data", str(data), "--arch", arch, "-o", str(ckpt), "--quiet", *extra)
+        fmus[arch] = work / f"{arch}.fmu"
+        _nnfmu("export", str(ckpt), "-o", str(fmus[arch]), "--force")
+    scores = work / "scores.json"
+    _nnfmu("evaluate", "--data", str(data), *map(str, fmus.values()), "--json", str(scores))
+    models = {Path(m["fmu"]).stem: m for m in json.loads(scores.read_text())["models"]}
+    out = {name: (float(models[path.stem]["nrmse"]), cpu[name]) for name, path in fmus.items()}
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("datasets", nargs="+", type=Path)
+    p.add_argument("--archs", nargs="+", default=["mlp", "rnn", "lstm", "gru", "tcn"])
+    p.add_argument("--work", type=Path, default=Path("defaults-table"))
+    p.add_argument("--max-minutes", type=float, help="the time budget of every training (default: none)")
+    args = p.parse_args(argv)
+    extra = [] if args.max_minutes is None else ["--max-minutes", str(args.max_minutes)]
+    print(f"| dataset | model | test NRMSE (fmpy) | / linear | CPU s |\n|---|---|---|---|---|", flush=True)
+    for data in args.datasets:
+        rows = run_dataset(data, args.archs, args.work / data.name, extra)
+        base = rows["linear"][0]
+        for name, (score, seconds) in rows.items():
+            print(f"| {data.name} | {name} | {score:.4f} | {score / base:.3f} | {seconds:.0f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

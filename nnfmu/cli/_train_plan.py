@@ -1,0 +1,63 @@
+"""``nnfmu train`` at its defaults: the linear path and the training choices made from the data.
+
+Without ``--linear-path off`` (and without ``--increment``) every network starts on a linear path
+(:mod:`nnfmu.models.linear_path`): the linear baseline is identified on the training split first, and
+the network learns a correction to it, starting from zero. The windows, batch, budget and validation
+tail the user left out are chosen from the data (:mod:`nnfmu.training.plan`); the choices are printed.
+"""
+
+from __future__ import annotations
+
+import time
+
+
+def prepare(args, ds, model_config, train_config, given: dict):
+    """``(dataset with its validation split, model_config, train_config, linear model or None)`` for a new run."""
+    from nnfmu.training.plan import plan_training, valid_fraction
+    from nnfmu.training.trainer import prepare_dataset
+
+    if model_config.arch == "hybrid":
+        return ds, model_config, train_config, None
+    init_window = model_config.init_window
+    if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
+        train_config = train_config.replace(valid_fraction=frac)
+    carved, notes = prepare_dataset(ds, train_config)
+    for note in notes:
+        print(f"note: {note}")
+    linear = _linear_start(args, carved, model_config)
+    if linear is not None:
+        model_config = model_config.replace(linear_order=linear.n_x)
+    plan = plan_training(ds, {**given, "valid_fraction": train_config.valid_fraction}, linear=linear,
+                         init_window=init_window)
+    for line in plan.lines:
+        print(f"plan: {line}")
+    return carved, model_config, train_config.replace(**plan.changes), linear
+
+
+def _linear_start(args, ds, model_config):
+    """The identified linear model the network starts from, or None (``--linear-path off``, increment mode)."""
+    from nnfmu.linear import LinearConfig, identify_linear
+
+    if args.linear_path == "off":
+        return None
+    if args.increment is not None or model_config.increment:
+        print("plan: no linear path (increment mode carries the output from step to step; --linear-path off)")
+        return None
+    t0 = time.process_time()
+    linear = identify_linear(ds, LinearConfig(), progress=False)
+    print(f"plan: linear path of {linear.n_x} states, the identified linear baseline (validation free-run NRMSE "
+          f"{linear.info['nrmse_valid']:.4f}, {time.process_time() - t0:.1f} CPU-s); the network learns a "
+          "correction to it, starting at zero (--linear-path off: the network alone)")
+    return linear
+
+
+def report_end(result, linear) -> None:
+    """What the user should know about how the run ended: still improving, or never better than its start."""
+    from nnfmu.training.plan import still_improving
+
+    if still_improving(result.history, result.best_epoch, result.stop_reason):
+        print(f"still improving when stopped (best epoch {result.best_epoch} of {result.history[-1]['epoch']}): "
+              "a larger budget (--epochs or --max-minutes) may help")
+    if result.best_epoch == 0:
+        start = "the linear model" if linear is not None else "the untrained network"
+        print(f"the training never improved on its start on validation: the kept weights are {start}'s")
