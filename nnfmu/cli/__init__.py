@@ -9,10 +9,13 @@ stays fast.
 
 The contract of every command (:func:`run`):
 
+- every numeric option is checked against its valid range before the command
+  does any work (:mod:`nnfmu.cli._checks`);
 - errors of the toolkit (:class:`nnfmu.errors.NnfmuError`) and of the operating
   system (an ``OSError`` such as a read-only folder, a full disk or a path
   through a regular file) print one line, ``nnfmu <command>: error: <message>``,
-  and exit with status 2, like argparse's own usage errors;
+  and exit with status 2, like argparse's own usage errors; warnings raised
+  on the way (torch's, numpy's) are dropped then, and shown at the end otherwise;
 - files are written atomically (:mod:`nnfmu.atomic`), so a failed command
   leaves no partial file at its output;
 - Ctrl-C exits with 130 and SIGTERM with 143 (128 + the signal number), after
@@ -28,8 +31,10 @@ import pkgutil
 import signal
 import sys
 import threading
+import warnings
 
 from nnfmu.atomic import describe_os_error
+from nnfmu.cli._checks import check_numbers
 from nnfmu.errors import NnfmuError
 
 SIGINT_STATUS, SIGTERM_STATUS = 128 + signal.SIGINT, 128 + signal.SIGTERM
@@ -77,11 +82,21 @@ def sigterm_as_exception():
         signal.signal(signal.SIGTERM, previous)
 
 
-def run(func, args: argparse.Namespace, prog: str) -> int:
-    """Call a command's ``func``; turn toolkit and OS errors into one line and status 2 (module docstring)."""
+def run(func, args: argparse.Namespace, prog: str, parser: argparse.ArgumentParser | None = None) -> int:
+    """Call a command's ``func``; turn toolkit and OS errors into one line and status 2 (module docstring).
+
+    ``parser`` (the command's own): its numeric options are checked first (:mod:`nnfmu.cli._checks`).
+    Warnings (torch's, numpy's) are held back and shown after the command, or dropped when it fails, so that
+    a failure is the one error line.
+    """
     try:
-        with sigterm_as_exception():
-            return int(func(args) or 0)
+        with sigterm_as_exception(), warnings.catch_warnings(record=True) as caught:
+            if parser is not None:
+                check_numbers(parser, args, getattr(args, "command", prog.split()[-1]))
+            status = int(func(args) or 0)
+        for w in caught:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+        return status
     except NnfmuError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
@@ -96,7 +111,13 @@ def run(func, args: argparse.Namespace, prog: str) -> int:
         return SIGTERM_STATUS
 
 
+def command_parser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The sub-parser of ``command`` in the ``nnfmu`` parser."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[command]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    return run(args.func, args, f"nnfmu {args.command}")
+    return run(args.func, args, f"nnfmu {args.command}", command_parser(parser, args.command))

@@ -41,6 +41,27 @@ def add_fmu_options(parser: argparse.ArgumentParser) -> None:
                              "derivative correction), which otherwise offers Model Exchange too")
 
 
+def check_fmu_options(args: argparse.Namespace) -> None:
+    """Check ``--target-isa`` with this machine's C compiler before any work, so a typo is one line that lists
+    the valid values, not the compiler's stderr after minutes of identification."""
+    import os
+    import re
+
+    from nnfmu.errors import ConfigError, FmuBuildError
+    from nnfmu.export.compiler import run_compiler
+
+    if args.target_isa is None or args.platforms not in (None, "host"):
+        return  # cross-compiled binaries: Zig judges -march per target
+    try:
+        run_compiler([f"-march={args.target_isa}", "-E", "-x", "c", os.devnull], what="checking --target-isa")
+    except FmuBuildError as exc:
+        stderr = getattr(exc, "stderr", "") or ""
+        valid = re.search(r"valid (?:arguments to \S*-march=\S* switch|target CPU values) are: ([^\n]*)", stderr)
+        choices = ", ".join(["native", *valid.group(1).replace(";", "").split()]) if valid else "native"
+        raise ConfigError(f"--target-isa {args.target_isa!r} is not an -march value the C compiler knows; choose "
+                          f"one of: {choices} (or leave it out for the portable default)") from None
+
+
 def build_options(args: argparse.Namespace):
     from nnfmu.export.fmu import BuildOptions
 
@@ -73,6 +94,7 @@ def export_checkpoint(args: argparse.Namespace) -> int:
 
     if args.name is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", args.name):
         raise ConfigError(f"--name must be an ASCII C identifier (letters, digits, '_'), got {args.name!r}")
+    check_fmu_options(args)
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 

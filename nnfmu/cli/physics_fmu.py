@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from nnfmu.cli.export import add_fmu_options, write_fmu
+from nnfmu.cli.export import add_fmu_options, check_fmu_options, write_fmu
 
 SYSTEMS = ("valve", "arm")
 
@@ -46,6 +46,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.n_sub is not None and args.n_sub < 1:
         raise ConfigError(f"--n-sub must be a positive number of RK4 sub-steps, got {args.n_sub}")
     check_at_most("--n-sub", args.n_sub, MAX_RK4_SUBSTEPS, "MAX_RK4_SUBSTEPS")
+    check_fmu_options(args)
     model = physics_system(args.system).model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
     write_fmu(model, Path(args.out or f"{args.system}.fmu"), args)
     return 0

@@ -215,6 +215,7 @@ def _differs(config, key: str, value) -> bool:
 def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from nnfmu.cli._checks import check_training_data
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
@@ -229,6 +230,7 @@ def _run(args: argparse.Namespace) -> int:
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
     hybrid = model_config.arch == "hybrid"
     train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
+    check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
     linear = None

@@ -168,6 +168,10 @@ def _linear_path_to_casadi(model: LinearPathStepModel) -> tuple[ca.Function, ca.
 
 def verify_export(model: StepModel, init: ca.Function, step: ca.Function, seed: int = 0) -> None:
     """Raise ExportError unless ``init`` and one ``step`` from a random state match the torch model."""
+    bad = [k for k, t in model.state_dict().items() if t.is_floating_point() and not bool(torch.isfinite(t).all())]
+    if bad:  # NaN weights would fail the comparison below with a misleading blame
+        raise ExportError(f"the model's weights are not finite (NaN or inf in {', '.join(bad[:3])}): its training "
+                          "diverged; retrain it with a lower learning rate (nnfmu train --lr, TrainConfig.lr)")
     ref = copy.deepcopy(model).double().eval()
     rng = np.random.default_rng(seed)
     c = model.config

@@ -41,7 +41,7 @@ from threadpoolctl import threadpool_limits
 from nnfmu.progress import tqdm  # a line every few seconds in a log file, not one per evaluation
 
 from nnfmu.data import Dataset, Trajectories
-from nnfmu.errors import ConfigError, ShapeError, check_options
+from nnfmu.errors import ConfigError, DataError, ShapeError, check_options
 from nnfmu.linear.model import LinearModel
 from nnfmu.linear.refine import METHODS, X0_OPTIONS, EarlyStop, refine
 from nnfmu.linear.statespace import (
@@ -214,6 +214,9 @@ def _choose_order(fit, config: LinearConfig, train, check, progress: bool) -> tu
         scores[n] = free_run_nrmse(sys, config.init, *check)
         orders.set_postfix(order=n, nrmse=f"{scores[n]:.4f}", best=min(scores, key=scores.get))
     orders.close()
+    if not scores:  # every singular value is zero: constant data
+        raise DataError("the training data show no dynamics (the inputs and outputs are constant, so every "
+                        "singular value is 0); a linear model needs data that vary: check the dataset's signals")
     best = min(scores.values())
     limit = best + max(config.order_tolerance * best, 1e-6)
     return min(n for n, v in scores.items() if v <= limit), scores
