@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -30,6 +29,7 @@ from nnfmu.data import Dataset
 from nnfmu.errors import DataError, DataFileError, SimulationError
 from nnfmu.metrics import NrmseResult
 from nnfmu.protocols import Protocol
+from nnfmu.tempdirs import make_temp_dir
 from nnfmu.valid_range import OutOfRange, count_outside
 from nnfmu.window_names import fmu_init_window, window_start_values
 
@@ -112,7 +112,7 @@ class FmuSimulator:
         self.info = inspect_fmu(path)
         self.input_names, self.output_names, self.Ts = list(input_names), list(output_names), float(Ts)
         self.messages: list[str] = []
-        self._dir = tempfile.mkdtemp(prefix="nnfmu-cosim-")
+        self._dir = str(make_temp_dir("nnfmu-cosim-"))  # removed by a later run if this process is killed
         try:
             self._unzipdir = extract(str(path), unzipdir=self._dir)
             self._md = read_model_description(self._unzipdir)

@@ -1,10 +1,13 @@
-"""NRMSE, the one scoring rule of nnfmu (docs/design.md, "NRMSE: the scoring rule"), with RMSE and fit %.
+"""NRMSE, the one scoring rule of nnfmu (docs/design.md, "NRMSE: the scoring rule"), with RMSE, MAE, fit % and R².
 
 For a trajectory and output k::
 
     NRMSE_k = RMSE_k / std_k,   std_k = std of the measured y_k over the horizon (ddof 0)
     RMSE_k  = sqrt(mean((y_k - yhat_k)^2)), in the output's own unit
     fit_k   = 100 (1 - NRMSE_k) %     (the "fit" of system identification toolboxes)
+    MAE_k   = mean(|y_k - yhat_k|), in the output's own unit
+    R2_k    = 1 - sum((y_k - yhat_k)^2) / sum((y_k - mean(y_k))^2) = 1 - NRMSE_k^2
+              (the coefficient of determination; 1 is perfect, 0 is the measured mean, below 0 worse)
 
 The trajectory's NRMSE is the mean over outputs, and a dataset's NRMSE is the
 mean over its trajectories. The horizon is every sample handed in; the
@@ -14,8 +17,8 @@ sample is the measured ``y0``.
 The paper prints the sum over outputs inside the square root, but compares its
 robot results with the benchmark's baseline, which averages per-joint NRMSE;
 nnfmu uses the per-output mean everywhere so that both datasets are scored
-like the benchmark. RMSE and fit are aggregated the same way (mean over
-trajectories); RMSE is never averaged over outputs, whose units differ.
+like the benchmark. RMSE, MAE, fit and R² are aggregated the same way (mean
+over trajectories); RMSE and MAE are never averaged over outputs, whose units differ.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ class NrmseResult:
         Per-output NRMSE averaged over trajectories.
     rmse : ndarray, shape (n_traj, n_y)
         RMSE of each output on each trajectory, in the output's unit (None only for a result built by hand).
+    mae : ndarray, shape (n_traj, n_y)
+        Mean absolute error of each output on each trajectory, in the output's unit (None as ``rmse``).
     """
 
     per_output: np.ndarray
@@ -51,6 +56,7 @@ class NrmseResult:
     mean: float
     output_mean: np.ndarray
     rmse: np.ndarray | None = None
+    mae: np.ndarray | None = None
 
     @property
     def rmse_output_mean(self) -> np.ndarray:
@@ -58,12 +64,27 @@ class NrmseResult:
         return self.rmse.mean(axis=0)
 
     @property
+    def mae_output_mean(self) -> np.ndarray:
+        """Per-output MAE averaged over trajectories, shape (n_y,), in each output's unit."""
+        return self.mae.mean(axis=0)
+
+    @property
+    def r2_output_mean(self) -> np.ndarray:
+        """Per-output R² (``1 - NRMSE²`` per trajectory) averaged over trajectories, shape (n_y,)."""
+        return (1.0 - self.per_output**2).mean(axis=0)
+
+    @property
+    def r2(self) -> float:
+        """R² averaged over outputs and trajectories (as the NRMSE): 1 is perfect, 0 is the measured mean."""
+        return float((1.0 - self.per_output**2).mean())
+
+    @property
     def fit(self) -> float:
         """Fit in percent, ``100 (1 - NRMSE)``: 100 is perfect, 0 is no better than the measured mean."""
         return fit_percent(self.mean)
 
     def to_json(self, outputs: Sequence | None = None) -> dict:
-        """Scores as JSON: the totals, then per output and per trajectory (each with NRMSE, RMSE and fit %).
+        """Scores as JSON: the totals, then per output and per trajectory (each with NRMSE, RMSE, MAE, fit %, R²).
 
         ``outputs`` are the output names, or :class:`~nnfmu.data.Channel` objects whose units are
         recorded beside the RMSE. The keys ``nrmse``, ``per_output`` (name -> NRMSE) and
@@ -74,20 +95,26 @@ class NrmseResult:
         names = [getattr(o, "name", o) for o in outputs]
         units = [getattr(o, "unit", None) for o in outputs]
         rmse = self.rmse if self.rmse is not None else np.full(self.per_output.shape, np.nan)
+        mae = self.mae if self.mae is not None else np.full(self.per_output.shape, np.nan)
 
-        def cell(nrmse_value, rmse_value, unit=None) -> dict:
-            out = {"nrmse": float(nrmse_value), "rmse": _finite(rmse_value), "fit_percent": fit_percent(nrmse_value)}
+        def cell(nrmse_value, rmse_value, mae_value, r2_value, unit=None) -> dict:
+            out = {"nrmse": float(nrmse_value), "rmse": _finite(rmse_value), "mae": _finite(mae_value),
+                   "fit_percent": fit_percent(nrmse_value), "r2": float(r2_value)}
             return out if unit is None else {"unit": unit, **out}
 
+        r2 = 1.0 - self.per_output**2
         return {
             "nrmse": float(self.mean),
             "fit_percent": self.fit,
+            "r2": self.r2,
             "per_output": {n: float(v) for n, v in zip(names, self.output_mean)},
             "per_trajectory": [float(v) for v in self.per_trajectory],
-            "outputs": {n: cell(v, r, u) for n, v, r, u in zip(names, self.output_mean, rmse.mean(axis=0), units)},
+            "outputs": {n: cell(*values) for n, *values in
+                        zip(names, self.output_mean, rmse.mean(axis=0), mae.mean(axis=0), r2.mean(axis=0), units)},
             "trajectories": [{"index": i, "nrmse": float(self.per_trajectory[i]),
-                              "fit_percent": fit_percent(self.per_trajectory[i]),
-                              "outputs": {n: cell(v, r) for n, v, r in zip(names, self.per_output[i], rmse[i])}}
+                              "fit_percent": fit_percent(self.per_trajectory[i]), "r2": float(r2[i].mean()),
+                              "outputs": {n: cell(*values) for n, *values in
+                                          zip(names, self.per_output[i], rmse[i], mae[i], r2[i])}}
                              for i in range(len(self.per_trajectory))],
         }
 
@@ -130,7 +157,7 @@ def nrmse(y_true, y_pred) -> NrmseResult:
     ts, ps = _as_list(y_true, "y_true"), _as_list(y_pred, "y_pred")
     if len(ts) != len(ps):
         raise ShapeError(f"y_true has {len(ts)} trajectories but y_pred has {len(ps)}")
-    rows, rmse_rows = [], []
+    rows, rmse_rows, mae_rows = [], [], []
     for i, (t, p) in enumerate(zip(ts, ps)):
         if t.shape != p.shape or t.ndim != 2:
             raise ShapeError(f"trajectory {i}: y_true has shape {t.shape} but y_pred has {p.shape}; "
@@ -144,6 +171,7 @@ def nrmse(y_true, y_pred) -> NrmseResult:
             raise MetricError(f"trajectory {i}: measured output {j} is constant, so its NRMSE is undefined; "
                               "drop that trajectory or output from the scored split")
         rmse_rows.append(np.sqrt(np.mean((t - p) ** 2, axis=0)))
+        mae_rows.append(np.mean(np.abs(t - p), axis=0))
         rows.append(rmse_rows[-1] / std)
     if not rows:
         raise ShapeError("no trajectories to score")
@@ -151,4 +179,5 @@ def nrmse(y_true, y_pred) -> NrmseResult:
         raise ShapeError("trajectories have different numbers of outputs")
     per_output = np.vstack(rows)
     per_traj = per_output.mean(axis=1)
-    return NrmseResult(per_output, per_traj, float(per_traj.mean()), per_output.mean(axis=0), np.vstack(rmse_rows))
+    return NrmseResult(per_output, per_traj, float(per_traj.mean()), per_output.mean(axis=0), np.vstack(rmse_rows),
+                       np.vstack(mae_rows))

@@ -63,3 +63,17 @@ def test_non_finite_prediction_is_an_error():
 def test_shape_mismatch():
     with pytest.raises(ShapeError, match="y_true has shape"):
         nrmse(np.zeros((10, 2)), np.zeros((9, 2)))
+
+
+def test_r2_and_mae_hand_computed():
+    """R² = 1 - SSE/SST (the nonlinear-benchmarks' definition) and MAE, per output, in JSON and as means."""
+    y = np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 2.0], [4.0, 2.0]])
+    p = y + np.array([[0.0, 0.5], [1.0, 0.5], [0.0, 0.5], [-1.0, 0.5]])
+    r = nrmse(y, p)
+    sse, sst = ((y - p) ** 2).sum(axis=0), ((y - y.mean(axis=0)) ** 2).sum(axis=0)  # [2, 1], [5, 4]
+    np.testing.assert_allclose(r.r2_output_mean, 1 - sse / sst, rtol=1e-14)  # [0.6, 0.75]
+    assert r.r2 == pytest.approx(0.675, rel=1e-14)
+    np.testing.assert_allclose(r.mae_output_mean, [0.5, 0.5], rtol=1e-15)
+    js = r.to_json(["a", "b"])
+    assert js["r2"] == pytest.approx(0.675) and js["outputs"]["a"]["r2"] == pytest.approx(0.6)
+    assert js["outputs"]["b"]["mae"] == pytest.approx(0.5) and js["trajectories"][0]["outputs"]["a"]["mae"] == 0.5

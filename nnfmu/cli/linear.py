@@ -64,6 +64,7 @@ def _summary(model, dataset) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_LINEAR_ORDER, check_at_most
@@ -80,16 +81,22 @@ def _run(args: argparse.Namespace) -> int:
                           refine=not args.no_refine, refine_x0=args.refine_x0,
                           refine_method=args.refine_method, max_evaluations=args.max_evaluations,
                           threads=args.threads)
+    if args.out:
+        from nnfmu.cli.export import check_fmu_options
+
+        check_fmu_options(args)
     dataset = load_dataset(args.data)
+    check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
     print(f"linear: identifying on {args.data}: " + (f"order {args.order}" if args.order else
           f"orders up to {args.max_order}") + ("" if args.no_refine else f", then up to {config.evaluations} "
           "refinement evaluations (may take minutes)"), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
-    if args.out:  # first: a failing -o then leaves no file at all
-        from nnfmu.cli.export import write_fmu
+    with all_or_nothing(args.out, args.save):  # a failing --save removes the FMU just written, and the reverse
+        if args.out:
+            from nnfmu.cli.export import write_fmu
 
-        write_fmu(model.casadi_model(name=args.name), Path(args.out), args)
-    if args.save:
-        print(f"wrote {model.save(args.save)}")
+            write_fmu(model.casadi_model(name=args.name), Path(args.out), args)
+        if args.save:
+            print(f"wrote {model.save(args.save)}")
     return 0

@@ -34,7 +34,6 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import shutil
-import tempfile
 import uuid
 import zipfile
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from nnfmu.export import model_exchange as _model_exchange
 from nnfmu.export import platforms as _platforms
 from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.system import CasadiModel
+from nnfmu.tempdirs import private_temp_dir
 
 TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c",
              "nnfmu_state.c", "nnfmu_libm.c")
@@ -227,7 +227,7 @@ def build_fmu(model: CasadiModel, out: str | PathLike, *, fmi_version: int = 2,
     if not out.parent.is_dir():
         problem = "is a file, not a folder" if out.parent.exists() else "does not exist; create it first"
         raise FmuBuildError(f"cannot write {out}: the folder {str(out.parent)!r} for the FMU {problem}")
-    with tempfile.TemporaryDirectory(prefix="nnfmu-build-") as tmp:
+    with private_temp_dir("nnfmu-build-") as tmp:  # its pid in the name: a later build removes it if killed
         _write_fmu_tree(model, fmi_version, Path(tmp) / "fmu", options, model_exchange and model.continuous is not None,
                         targets, on_binary)
         write_atomic(out, lambda partial: _zip_tree(Path(tmp) / "fmu", partial))
