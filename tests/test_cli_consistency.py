@@ -74,3 +74,24 @@ def test_info_on_an_fmu_and_a_checkpoint(dataset_dir, tmp_path, capsys):
     assert "force [N]" in text and "pos [m]" in text and "pos_start [m]" in text and "linux64" in text
     assert main(["info", str(tmp_path / "none.fmu")]) == 2
     assert "none.fmu not found" in capsys.readouterr().err
+
+
+def test_info_is_a_readable_summary_that_says_which_range(dataset_dir, capsys):
+    assert main(["info", str(dataset_dir)]) == 0
+    text = capsys.readouterr().out
+    assert "ranges: in the train split (as 'nnfmu import' prints them), then over all splits" in text
+    assert "train: 1 trajectories, 60 samples" in text and "{" not in text  # no raw JSON in the summary
+    assert main(["info", str(dataset_dir), "--json"]) == 0
+    force = json.loads(capsys.readouterr().out)["inputs"][0]
+    assert force["train_range"][0] >= force["range"][0] and force["train_range"][1] <= force["range"][1]
+
+
+def test_info_shows_a_time_budget_not_the_epoch_sentinel():
+    from nnfmu.cli.info import render
+    from nnfmu.limits import UNBOUNDED_EPOCHS
+
+    text = render({"kind": "checkpoint", "path": "m.pt", "name": "m", "Ts": 0.1,
+                   "train_config": {"epochs": UNBOUNDED_EPOCHS, "max_minutes": 2.0, "lr": 0.003},
+                   "training": {"stop_reason": "time-budget", "seconds": 120.04, "resumable": True}})
+    assert "epochs unbounded (time budget), max_minutes 2, lr 0.003" in text
+    assert str(UNBOUNDED_EPOCHS) not in text and "seconds 120.0 s" in text and "resumable yes" in text

@@ -3,14 +3,20 @@
 An FMU: its model, FMI version, platforms, Ts, inputs, outputs and parameters
 with units and ranges, and who generated it. A checkpoint: the network, the
 data it was trained on (channels, Ts, provenance), the training settings and
-how it ended. A dataset folder: Ts, channels with units and ranges, splits,
-init window and provenance.
+how it ended. A dataset folder: Ts, channels with units and their range in the
+train split (as ``nnfmu import`` prints it) and over all splits, splits, init
+window and provenance.
+
+The text is a readable summary, one fact per line; ``--json`` prints the raw
+description (where a run bounded by its time budget alone stores
+``epochs = nnfmu.limits.UNBOUNDED_EPOCHS``, which the text calls "unbounded").
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import textwrap
 from pathlib import Path
 
 
@@ -19,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Describe an FMU (.fmu), a training checkpoint (.pt) or a dataset folder: inputs, "
                                    "outputs, units, Ts, ranges, provenance and the training summary.")
     p.add_argument("path", help="an .fmu file, a .pt checkpoint or a dataset folder")
-    p.add_argument("--json", action="store_true", help="print the description as JSON")
+    p.add_argument("--json", action="store_true", help="print the raw description as JSON (default: a readable "
+                                                       "summary)")
     p.set_defaults(func=_run)
 
 
@@ -49,11 +56,15 @@ def _dataset(path: Path) -> dict:
     from nnfmu.data import load_dataset
 
     ds = load_dataset(path)
-    u = np.concatenate([a for tr in ds.splits.values() for a in tr.u])
-    y = np.concatenate([a for tr in ds.splits.values() for a in tr.y])
-    channels = lambda chans, data: [{**c.to_json(), "range": _range(data[:, j])} for j, c in enumerate(chans)]
-    return {"kind": "dataset", "path": str(path), "Ts": ds.Ts, "inputs": channels(ds.inputs, u),
-            "outputs": channels(ds.outputs, y), "init_window": ds.init_window,
+    every = {k: np.concatenate([a for tr in ds.splits.values() for a in getattr(tr, k)]) for k in ("u", "y")}
+    train = {k: np.concatenate(list(getattr(ds.train, k))) for k in ("u", "y")}
+
+    def channels(chans, k: str) -> list[dict]:
+        return [{**c.to_json(), "train_range": _range(train[k][:, j]), "range": _range(every[k][:, j])}
+                for j, c in enumerate(chans)]
+
+    return {"kind": "dataset", "path": str(path), "Ts": ds.Ts, "inputs": channels(ds.inputs, "u"),
+            "outputs": channels(ds.outputs, "y"), "init_window": ds.init_window,
             "splits": {k: {"n_traj": v.n_traj, "n_samples": v.n_samples, "lengths": sorted(set(v.lengths.tolist()))}
                        for k, v in ds.splits.items()},
             "source": ds.source}
@@ -112,25 +123,48 @@ def _checkpoint(path: Path) -> dict:
             "training": summary, "source": meta.get("source", {})}
 
 
+_TITLES = {"init_window": "init window", "model_config": "network", "train_config": "training settings",
+           "training": "training result", "source": "provenance"}
+
+
 def render(doc: dict) -> str:
-    """The description as a few readable lines."""
+    """The description as readable lines: a heading, the channels, then one indented line per setting."""
     lines = [f"{doc['path']}: {doc['kind']}"]
     head = {"dataset": ("Ts",), "fmu": ("model", "description", "fmi_version", "interfaces", "platforms", "Ts",
                                         "generation_tool", "generated"), "checkpoint": ("name", "Ts")}[doc["kind"]]
-    lines += [f"  {key}: {_text(doc[key])}" for key in head if doc.get(key) not in (None, [], "")]
+    lines += [f"  {key}: {_text(doc[key])}" + (" s" if key == "Ts" else "") for key in head
+              if doc.get(key) not in (None, [], "")]
+    if doc["kind"] == "dataset":
+        lines.append("  ranges: in the train split (as 'nnfmu import' prints them), then over all splits")
     for role in ("inputs", "outputs", "parameters"):
         if doc.get(role):
             lines.append(f"  {role}:")
             lines += [f"    {_channel(c)}" for c in doc[role]]
-    for key in ("init_window", "splits", "model_config", "train_config", "training", "source"):
-        if doc.get(key) not in (None, {}, []):
-            lines.append(f"  {key}: {_text(doc[key])}")
+    if doc.get("splits"):
+        lines.append("  splits:")
+        lines += [f"    {name}: {s['n_traj']} trajectories, {s['n_samples']} samples (lengths "
+                  f"{', '.join(map(str, s['lengths']))})" for name, s in doc["splits"].items()]
+    for key in ("init_window", "model_config", "train_config", "training", "source"):
+        value = doc.get(key)
+        if value in (None, {}, []):
+            continue
+        if not isinstance(value, dict):
+            lines.append(f"  {_TITLES.get(key, key)}: {_text(value, key)}")
+            continue
+        pairs = [f"{k} {_text(v, k)}" for k, v in value.items() if v not in (None, "", [], {})]
+        lines.append(f"  {_TITLES.get(key, key)}:")
+        lines += textwrap.wrap(", ".join(pairs), 110, initial_indent="    ", subsequent_indent="    ",
+                               break_on_hyphens=False)
     return "\n".join(lines)
 
 
 def _channel(c: dict) -> str:
     text = f"{c['name']} [{c.get('unit') or '-'}]"
-    if "range" in c:
+    if "train_range" in c:
+        text += f"  range {c['train_range'][0]:.4g} .. {c['train_range'][1]:.4g}"
+        if c.get("range") and c["range"] != c["train_range"]:
+            text += f" (all splits {c['range'][0]:.4g} .. {c['range'][1]:.4g})"
+    elif "range" in c:
         text += f"  range {c['range'][0]:.4g} .. {c['range'][1]:.4g}"
     if "min" in c or "max" in c:
         text += f"  min {c.get('min', '-')}, max {c.get('max', '-')}"
@@ -141,11 +175,20 @@ def _channel(c: dict) -> str:
     return text + (f"  ({c['description']})" if c.get("description") else "")
 
 
-def _text(value) -> str:
-    if isinstance(value, list) and all(isinstance(v, str) for v in value):
-        return ", ".join(value)
-    if isinstance(value, (dict, list)):
-        return json.dumps(value, default=str)
+def _text(value, key: str = "") -> str:
+    """One value as text: lists joined by commas, dicts as ``key value`` pairs, the epoch sentinel in words."""
+    from nnfmu.limits import UNBOUNDED_EPOCHS
+
+    if key == "epochs" and value == UNBOUNDED_EPOCHS:
+        return "unbounded (time budget)"
+    if key == "seconds" and isinstance(value, (int, float)):
+        return f"{value:.1f} s"
+    if isinstance(value, bool) or value is None:
+        return {True: "yes", False: "no", None: "-"}[value]
+    if isinstance(value, list):
+        return ", ".join(_text(v) for v in value)
+    if isinstance(value, dict):
+        return "; ".join(f"{k} {_text(v, k)}" for k, v in value.items())
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
