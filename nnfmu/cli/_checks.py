@@ -71,7 +71,7 @@ RULES: dict[str | tuple[str, str], Rule] = {
     "n_sub": Rule(1, MAX_RK4_SUBSTEPS, constant="nnfmu.limits.MAX_RK4_SUBSTEPS"),
     # tune
     "samples": Rule(1, 1000), "trials": Rule(1, 100_000), "grace_epochs": Rule(1, UNBOUNDED_EPOCHS),
-    "cpus_per_trial": Rule(0, MAX_JOBS, lo_open=True), "gpus_per_trial": Rule(0, 64),
+    "cpus_per_trial": Rule(1, MAX_JOBS), "gpus_per_trial": Rule(0, 64),
     # evaluate
     "trajectory": Rule(0, fix="trajectories are numbered from 0"), "horizon": _COUNT,
     # linear

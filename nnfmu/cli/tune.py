@@ -12,6 +12,7 @@ hyperparameters as JSON and the ``nnfmu train`` line that uses them.
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 from nnfmu.cli._text import description
 
@@ -24,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tune", help="grid-search an architecture's hyperparameters on Ray Tune (extra 'tune')",
                        description=description(__doc__))
     p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--arch", required=True, choices=["mlp", "rnn", "lstm", "gru", "tcn"])
+    p.add_argument("--arch", required=True, choices=["mlp", "rnn", "lstm", "gru", "tcn"],
+                   help="the network architecture whose hyperparameters are searched")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"], default="parallel",
                    help="training strategy of every trial (default parallel)")
     p.add_argument("--address", help="address of a running Ray cluster (default: start a local instance)")
@@ -52,8 +54,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", choices=["fifo", "asha"], default="fifo",
                    help="fifo: every trial runs to its end (default); asha: stop trailing trials early")
     p.add_argument("--grace-epochs", type=int, default=1, help="asha: epochs before a trial may be stopped (default 1)")
-    p.add_argument("--cpus-per-trial", type=float, default=1.0,
-                   help="CPUs Ray reserves for each trial, used as its torch threads (default 1)")
+    p.add_argument("--cpus-per-trial", type=float, default=None,
+                   help="CPUs Ray reserves for each trial, used as its torch threads (default 1, or --threads)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="torch threads of each trial; Ray reserves as many CPUs for it (default 1)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no Ray trial tables or log lines: only the result (Ray's verbose=0, its and Optuna's "
+                        "loggers at WARNING)")
     p.add_argument("--gpus-per-trial", type=float, default=None,
                    help="GPUs for each trial, a fraction shares one (default: 1 with --device cuda, else 0)")
     p.add_argument("--device", default="auto", metavar="auto|cpu|cuda",
@@ -98,11 +105,42 @@ def _system(args, ds) -> str:
                       "valve|arm|robot to choose the base configuration and the grid")
 
 
+def _cpus_per_trial(args: argparse.Namespace) -> float:
+    """``--threads`` and ``--cpus-per-trial`` say the same (a trial's torch threads are its CPUs): one or both."""
+    from nnfmu.errors import ConfigError
+
+    if args.threads is not None and args.cpus_per_trial not in (None, args.threads):
+        raise ConfigError(f"--threads {args.threads} and --cpus-per-trial {args.cpus_per_trial:g} disagree: a trial's "
+                          "torch threads are the CPUs Ray reserves for it; give one of them")
+    return float(args.threads or args.cpus_per_trial or 1.0)
+
+
+@contextlib.contextmanager
+def _quiet_output():
+    """--quiet: Ray Tune's reporter that honours verbose=0 (the newer one still prints its experiment box), and
+    Ray's and Optuna's loggers at WARNING; errors and warnings still show."""
+    import logging
+    import os
+    from unittest import mock
+
+    loggers = [logging.getLogger(name) for name in ("ray", "ray.tune", "ray.train", "optuna")]
+    levels = [log.level for log in loggers]
+    for log in loggers:
+        log.setLevel(logging.WARNING)
+    try:
+        with mock.patch.dict(os.environ, {"RAY_AIR_NEW_OUTPUT": "0"}):
+            yield
+    finally:
+        for log, level in zip(loggers, levels):
+            log.setLevel(level)
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.data import load_dataset
     from nnfmu.study import TuneSettings, get_budget, require_ray, tune_architecture
 
     require_ray()  # before loading data: a missing extra is the first thing to say
+    cpus_per_trial = _cpus_per_trial(args)
     gpus = args.gpus_per_trial
     if gpus is None:
         from nnfmu.training.resources import resolve_device
@@ -115,11 +153,12 @@ def _run(args: argparse.Namespace) -> int:
                             patience=budget.tune_patience if args.patience is None else args.patience,
                             max_minutes=args.max_minutes or budget.tune_max_minutes, samples=args.samples,
                             seed=args.seed, search=args.search, trials=args.trials, scheduler=args.scheduler,
-                            grace_epochs=args.grace_epochs, cpus_per_trial=args.cpus_per_trial,
+                            grace_epochs=args.grace_epochs, cpus_per_trial=cpus_per_trial,
                             gpus_per_trial=gpus)
-    result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
-                               settings=settings, address=args.address, num_cpus=args.cpus, storage=args.storage,
-                               progress=True)
+    with _quiet_output() if args.quiet else contextlib.nullcontext():
+        result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
+                                   settings=settings, address=args.address, num_cpus=args.cpus,
+                                   storage=args.storage, progress=not args.quiet)
     how = f"{args.search} search, {args.scheduler} scheduler"
     print(f"\n{len(result.trials)} trials of {args.arch} ({args.strategy}; {how}); best validation free-run NRMSE "
           f"{result.best_valid_nrmse:.4f} with {result.best.to_dict()}")

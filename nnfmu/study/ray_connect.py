@@ -15,6 +15,7 @@ An address where nothing answers is one clear error instead of a hang.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import socket
 from unittest import mock
@@ -77,8 +78,11 @@ def connect(ray, address: str) -> None:
 
 
 @contextlib.contextmanager
-def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpus: float | None = None):
-    """Connect to the cluster at ``address`` or start a local Ray instance; stop what was started here."""
+def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpus: float | None = None,
+                quiet: bool = False):
+    """Connect to the cluster at ``address`` or start a local Ray instance; stop what was started here.
+
+    ``quiet``: a local instance logs warnings and errors only (not "Started a local Ray instance")."""
     ray, _ = require_ray()
     started = False
     if not ray.is_initialized():
@@ -86,7 +90,7 @@ def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpu
             connect(ray, address)
         else:
             ray.init(num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus, include_dashboard=False,
-                     log_to_driver=False)
+                     log_to_driver=False, logging_level=logging.WARNING if quiet else logging.INFO)
         started = True
     try:
         yield ray

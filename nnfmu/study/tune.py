@@ -230,7 +230,7 @@ def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel"
     run_config = tune.RunConfig(name=f"nnfmu-{arch}-{strategy}", verbose=1 if progress else 0,
                                 storage_path=None if storage is None else str(Path(storage).resolve()))
     space, tune_config = _search(tune, grid, settings)
-    with ray_session(address, num_cpus, num_gpus=None if address else _local_gpus(settings)):
+    with ray_session(address, num_cpus, num_gpus=None if address else _local_gpus(settings), quiet=not progress):
         results = tune.Tuner(trainable, param_space=space, run_config=run_config, tune_config=tune_config).fit()
         trials = [_trial_row(r, grid) for r in results]
     return _best(arch, strategy, base, grid, trials, ray.__version__)
@@ -256,7 +256,9 @@ def _search(tune, grid: Mapping[str, Sequence], settings: TuneSettings) -> tuple
         searcher_class = getattr(importlib.import_module(module), name)
         seeded = ({"sampler": importlib.import_module("optuna").samplers.TPESampler(seed=settings.seed)}
                   if settings.search == "optuna" else {"random_state_seed": settings.seed})
-        searcher = searcher_class(**seeded)
+        from nnfmu.study.no_repeat import NoRepeat
+
+        searcher = NoRepeat(searcher_class(**seeded))  # a grid point is trained once, however often proposed
     except (ImportError, AssertionError) as exc:  # Ray's integrations assert that their package is there
         raise MissingExtraError(f"the {settings.search} search needs {package}, which is not installed ({exc}); "
                                 f"install the optional extra with: pip install \"nnfmu[search]\" "
