@@ -17,6 +17,8 @@ from unittest import mock
 import numpy as np
 import pytest
 
+from test_cli_contract import read_only_folder  # noqa: F401  (a fixture)
+
 from nnfmu.cli import build_parser
 from nnfmu.cli import main as nnfmu_main
 
@@ -32,7 +34,7 @@ ACCEPTED = {
 }
 #: Work that a command starts once its arguments are accepted; each is replaced by WorkStarted.
 WORK = ["nnfmu.training.train", "nnfmu.training.train_seeds", "nnfmu.linear.identify_linear",
-        "nnfmu.export.build_fmu", "nnfmu.cosim.evaluate", "nnfmu.study.reproduce", "nnfmu.study.run_demo",
+        "nnfmu.export.build_fmu", "nnfmu.cosim.simulate_split", "nnfmu.study.reproduce", "nnfmu.study.run_demo",
         "nnfmu.study.tune_architecture", "nnfmu.physics.generate_dataset", "nnfmu.data.save_dataset"]
 
 
@@ -77,8 +79,11 @@ def work(tmp_path_factory):
     csv2 = root / "d2.csv"
     csv2.write_text(csv.read_text())
     fmu = root / "m.fmu"
-    fmu.write_bytes(b"")  # evaluate's work is replaced, so the FMU is never opened before WorkStarted
-    return {"data": str(data), "ckpt": str(ckpt), "csv": str(csv), "csv2": str(csv2), "fmu": str(fmu)}
+    assert nnfmu_main(["linear", "--data", str(data), "--order", "1", "--no-refine", "--quiet", "-o", str(fmu)]) == 0
+    (root / "empty").write_bytes(b"")
+    (root / "afile").write_text("a regular file where a folder should be")
+    return {"data": str(data), "ckpt": str(ckpt), "csv": str(csv), "csv2": str(csv2), "fmu": str(fmu),
+            "empty": root / "empty", "afile": root / "afile"}
 
 
 def base_argv(command: str, w: dict, out: Path) -> list[str]:
@@ -156,3 +161,74 @@ def test_each_base_line_reaches_the_work(work, tmp_path, capsys):
         status, err = run_cli(base_argv(command, work, tmp_path / command), capsys)
         assert status == "work", (command, status, err)
 
+
+
+#: What each path-like option of a command is: read (an input) or written (an output). Every option that takes a
+#: string and has no fixed choices must be listed here or in TEXT, so that a new one joins the cases below.
+INPUTS = {"data": "data", "checkpoint": "ckpt", "fmus": "fmu", "path": "data", "files": "csv", "test": "csv2",
+          "valid": "csv2", "physics_params": None}
+OUTPUTS = {"out", "json", "plots", "save", "storage"}
+TEXT = {"target_isa", "platforms", "name", "address", "device", "grid", "size", "inputs", "outputs", "units", "time",
+        "Ts_column", "fs_column", "test_columns", "valid_columns", "train_physics", "data_dir", "increment"}
+#: Commands whose outputs are checked when written, not before the work starts (their writers keep the contract
+#: at write time; tests/test_cli_contract.py writes through them for real).
+LATE_OUTPUT_CHECK = {"demo", "generate", "import"}
+
+
+def _path_actions() -> list[tuple[str, argparse.Action]]:
+    return [(command, a) for command, parser in sorted(_commands().items()) for a in parser._actions
+            if a.type in (None, str) and a.nargs != 0 and not a.choices and a.dest not in ("help", "command")
+            and not isinstance(a, (argparse._StoreTrueAction, argparse._StoreConstAction))]
+
+
+def test_every_path_like_option_is_classified():
+    unknown = {(c, a.dest) for c, a in _path_actions() if a.dest not in INPUTS and a.dest not in OUTPUTS | TEXT}
+    assert not unknown, f"classify these options in tests/test_cli_hostile.py: {sorted(unknown)}"
+
+
+def _with(argv: list[str], action: argparse.Action, old: str | None, new: str) -> list[str]:
+    """``argv`` with the value ``old`` of ``action`` replaced by ``new``, or ``flag new`` appended."""
+    if old is not None and old in argv:
+        return [new if a == old else a for a in argv]
+    flag = max(action.option_strings, key=len) if action.option_strings else None
+    return argv + ([flag, new] if flag else [new])
+
+
+def _input_cases():
+    for command, action in _path_actions():
+        if action.dest in INPUTS:
+            for kind in ("empty", "missing"):
+                yield pytest.param(command, action.dest, kind, id=f"{command}-{action.dest}-{kind}")
+
+
+@pytest.mark.parametrize("command, dest, kind", list(_input_cases()))
+def test_an_empty_or_missing_input_is_refused_before_any_work(work, tmp_path, capsys, command, dest, kind):
+    action = next(a for c, a in _path_actions() if c == command and a.dest == dest)
+    hostile = str(work["empty"]) if kind == "empty" else str(tmp_path / "nothing-here")
+    old = work[INPUTS[dest]] if INPUTS[dest] else None
+    out = tmp_path / "out"
+    status, err = run_cli(_with(base_argv(command, work, out), action, old, hostile), capsys)
+    flags = [f for f in action.option_strings] or [dest]
+    assert_refused(status, err, hostile, *flags)
+    assert not out.exists()
+
+
+def _output_cases():
+    for command, action in _path_actions():
+        if action.dest in OUTPUTS and command not in LATE_OUTPUT_CHECK:
+            for kind in ("through-a-file", "read-only"):
+                yield pytest.param(command, action.dest, kind, id=f"{command}-{action.dest}-{kind}")
+
+
+@pytest.mark.parametrize("command, dest, kind", list(_output_cases()))
+def test_an_unwritable_output_is_refused_before_any_work(work, tmp_path, capsys, read_only_folder, command, dest,
+                                                           kind):
+    action = next(a for c, a in _path_actions() if c == command and a.dest == dest)
+    folder = work["afile"] if kind == "through-a-file" else read_only_folder
+    hostile = str(folder / "target")
+    argv = base_argv(command, work, tmp_path / "out")
+    old = next((argv[i + 1] for i, a in enumerate(argv[:-1]) if a in action.option_strings), None)
+    status, err = run_cli(_with(argv, action, old, hostile), capsys)
+    assert_refused(status, err, str(folder))
+    assert not (folder / "target").exists() and not (tmp_path / "out").exists()
+    assert work["afile"].read_text().startswith("a regular file")

@@ -89,17 +89,19 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
 def export_checkpoint(args: argparse.Namespace) -> int:
     import re
 
+    from nnfmu.cli._outputs import check_writable
     from nnfmu.errors import ConfigError
     from nnfmu.models import load_model
 
     if args.name is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", args.name):
         raise ConfigError(f"--name must be an ASCII C identifier (letters, digits, '_'), got {args.name!r}")
     check_fmu_options(args)
+    out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
+    check_writable(out)
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 
     model = casadi_model(network, name=args.name)
-    out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
     write_fmu(model, out, args)
     return 0
 

@@ -40,6 +40,7 @@ def physics_system(name: str):
 
 
 def _run(args: argparse.Namespace) -> int:
+    from nnfmu.cli._outputs import check_writable
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_RK4_SUBSTEPS, check_at_most
 
@@ -47,6 +48,8 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--n-sub must be a positive number of RK4 sub-steps, got {args.n_sub}")
     check_at_most("--n-sub", args.n_sub, MAX_RK4_SUBSTEPS, "MAX_RK4_SUBSTEPS")
     check_fmu_options(args)
+    out = Path(args.out or f"{args.system}.fmu")
+    check_writable(out)
     model = physics_system(args.system).model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
-    write_fmu(model, Path(args.out or f"{args.system}.fmu"), args)
+    write_fmu(model, out, args)
     return 0

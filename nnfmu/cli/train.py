@@ -216,12 +216,14 @@ def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from nnfmu.cli._checks import check_training_data
+    from nnfmu.cli._outputs import check_writable
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
     from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
     from nnfmu.models import load_checkpoint
 
     out = Path(args.out)
+    check_writable(out)  # before the data are loaded and the network built
     device = check_resource_options(args)
     ds = load_dataset(args.data)
     stored = load_checkpoint(out) if args.resume else None

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+from pathlib import Path
 
 from nnfmu.cli._text import description
 
@@ -123,6 +124,8 @@ def _quiet_output():
     import os
     from unittest import mock
 
+    with contextlib.suppress(ImportError):  # Optuna sets its logger to INFO when first imported: import it first
+        import optuna  # noqa: F401
     loggers = [logging.getLogger(name) for name in ("ray", "ray.tune", "ray.train", "optuna")]
     levels = [log.level for log in loggers]
     for log in loggers:
@@ -136,10 +139,12 @@ def _quiet_output():
 
 
 def _run(args: argparse.Namespace) -> int:
+    from nnfmu.cli._outputs import check_writable
     from nnfmu.data import load_dataset
     from nnfmu.study import TuneSettings, get_budget, require_ray, tune_architecture
 
     require_ray()  # before loading data: a missing extra is the first thing to say
+    check_writable(args.out, args.storage and Path(args.storage) / "x")  # before any trial runs
     cpus_per_trial = _cpus_per_trial(args)
     gpus = args.gpus_per_trial
     if gpus is None:
