@@ -107,3 +107,27 @@ def test_short_epochs_write_the_checkpoint_on_improvement_not_after_every_epoch(
 
     ckpt = load_checkpoint(tmp_path / "m.pt")
     assert ckpt["resume"]["epoch"] == 12 and ckpt["best_epoch"] == result.best_epoch
+
+
+def test_train_cli_starts_on_the_linear_path_says_its_plan_and_can_be_told_otherwise(tmp_path, capsys):
+    from nnfmu.cli import main
+    from nnfmu.data import save_dataset
+    from nnfmu.linear import identify_linear
+    from nnfmu.models import load_checkpoint
+    from tests.test_linear import dataset, true_system
+
+    ds = dataset(true_system(), noise=0.01)
+    data = save_dataset(ds, tmp_path / "d")
+    base = ["train", "--data", str(data), "--arch", "gru", "--hidden", "4", "--epochs", "2", "--quiet"]
+    assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
+    out = capsys.readouterr().out
+    assert "plan: linear path of" in out and "plan: batch:" in out and "plan: budget:" in out
+    assert load_checkpoint(tmp_path / "a.pt")["model_config"]["linear_order"] > 0
+    assert main([*base, "--linear-path", "off", "-o", str(tmp_path / "b.pt")]) == 0
+    assert load_checkpoint(tmp_path / "b.pt")["model_config"]["linear_order"] == 0
+    saved = identify_linear(ds, order=3).save(tmp_path / "lin.json")
+    assert main([*base, "--linear-path", str(saved), "-o", str(tmp_path / "c.pt")]) == 0
+    assert load_checkpoint(tmp_path / "c.pt")["model_config"]["linear_order"] == 3
+    capsys.readouterr()
+    assert main([*base, "--linear-path", str(tmp_path / "none.json"), "-o", str(tmp_path / "d.pt")]) == 2
+    assert "not found" in capsys.readouterr().err and not (tmp_path / "d.pt").exists()

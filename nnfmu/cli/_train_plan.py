@@ -36,13 +36,18 @@ def prepare(args, ds, model_config, train_config, given: dict):
 
 def _linear_start(args, ds, model_config):
     """The identified linear model the network starts from, or None (``--linear-path off``, increment mode)."""
-    from nnfmu.linear import LinearConfig, identify_linear
+    from nnfmu.linear import LinearConfig, identify_linear, load_linear
 
     if args.linear_path == "off":
         return None
     if args.increment is not None or model_config.increment:
         print("plan: no linear path (increment mode carries the output from step to step; --linear-path off)")
         return None
+    if args.linear_path != "auto":  # a linear model saved by `nnfmu linear --save FILE.json`
+        linear = load_linear(args.linear_path)
+        print(f"plan: linear path of {linear.n_x} states from {args.linear_path}; the network learns a correction "
+              "to it, starting at zero")
+        return linear
     t0 = time.process_time()
     linear = identify_linear(ds, LinearConfig(), progress=False)
     print(f"plan: linear path of {linear.n_x} states, the identified linear baseline (validation free-run NRMSE "

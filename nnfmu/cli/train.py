@@ -109,11 +109,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "increments, inputs relative to the newest output. 'auto' trains the network both ways "
                         "(into <out stem>.residual.pt and .increment.pt) and keeps the one with the lower "
                         "validation NRMSE")
-    p.add_argument("--linear-path", choices=["auto", "off"], default="auto",
+    p.add_argument("--linear-path", default="auto", metavar="auto|off|FILE.json",
                    help="auto (default): identify the linear baseline first and train the network as a correction "
                         "to it, starting at zero, so training starts at the linear model's error and the kept "
-                        "weights are never worse on validation; off: the network alone. Windows, batch, budget "
-                        "and validation tail left out are chosen from the data and printed")
+                        "weights are never worse on validation; FILE.json: start from a linear model saved by "
+                        "'nnfmu linear --save'; off: the network alone. Windows, batch, budget and validation tail "
+                        "left out are chosen from the data and printed")
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
