@@ -96,7 +96,7 @@ def test_without_a_c_compiler_training_runs_in_torch_with_a_warning(monkeypatch,
     def no_compiler(*args, **kwargs):
         raise FmuBuildError("no C compiler found: looked for 'cc' (PATH)")
 
-    monkeypatch.setattr("nnfmu.export.compiler.find_compiler", no_compiler)
+    monkeypatch.setattr("nnfmu.cbuild.compiler_argv", no_compiler)
     cr._library_or_none.cache_clear()
     try:
         with pytest.warns(RuntimeWarning, match="torch instead of compiled C"):

@@ -128,9 +128,9 @@ def cross_compile(target: Platform, sources: Sequence[Path], output: Path, *, in
     output.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="nnfmu-zig-") as tmp:
         built = Path(tmp) / output.name  # zig also writes .pdb/.lib beside a DLL: keep the library only
-        args = ["cc", "-target", target.zig_target, *portable_flags(flags), "-shared",
+        args = ["-target", target.zig_target, *portable_flags(flags), "-shared",
                 *(f"-I{d}" for d in include_dirs), *map(str, sources), "-o", str(built), "-lm"]
-        compiler.run_compiler(args, what=what, compiler=str(zig))
+        compiler.run_compiler(args, what=what, compiler=[str(zig), "cc"])
         shutil.move(str(built), output)
     return output
 
@@ -196,9 +196,9 @@ def prepare(targets: Sequence[Platform] | None = None, echo: Callable[[str], Non
             start = time.perf_counter()
             build_fmu(model, Path(tmp) / f"{target.fmi3}.fmu", platforms=[target.fmi3])
             libs = ["-ldl"] if target.suffix == ".so" else []
-            compiler.run_compiler(["cc", "-target", target.zig_target, "-std=c99", "-O2", str(program), "-o",
+            compiler.run_compiler(["-target", target.zig_target, "-std=c99", "-O2", str(program), "-o",
                                    str(Path(tmp) / f"{target.fmi3}.exe"), *libs],
-                                  what=f"preparing Zig for {target.fmi3}", compiler=str(zig_executable()))
+                                  what=f"preparing Zig for {target.fmi3}", compiler=[str(zig_executable()), "cc"])
             echo(f"zig is ready for {target.fmi3} ({time.perf_counter() - start:.0f} s)")
 
 

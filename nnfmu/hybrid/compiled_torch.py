@@ -4,7 +4,7 @@ The fast torch path for a physics model written once in CasADi.
 :func:`sx_to_torch` runs one torch operation per SX instruction (a few
 microseconds each); this module instead generates C for the Function and for
 its reverse-mode derivative ``fn.reverse(1)``, adds a small batch loop, and
-compiles them once into a shared library (cached like
+compiles them once into a shared library (cached by :mod:`nnfmu.cbuild`, like
 :func:`nnfmu.physics.compile_function`). A call hands the tensors' memory to
 that loop through :mod:`ctypes`: one C call per batch, forward and backward::
 
@@ -23,7 +23,6 @@ a second derivative raises an error.
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
 import tempfile
 import warnings
@@ -33,10 +32,9 @@ import casadi as ca
 import torch
 from torch.autograd.function import once_differentiable
 
+from nnfmu import cbuild
 from nnfmu.errors import ConfigError, ExportError, FmuBuildError, ShapeError, SimulationError
-from nnfmu.export.compiler import DEFAULT_FLAGS, compile_shared_library, find_compiler, shared_library_suffix
 from nnfmu.hybrid.casadi_torch import _common_dtype, sx_to_torch
-from nnfmu.physics.compiled import cache_dir
 
 BACKENDS = ("compiled", "sx")
 
@@ -145,20 +143,11 @@ def _source(fwd: ca.Function, rev: ca.Function) -> str:
 
 
 def _library(source: str, name: str, compiler: str | None) -> ctypes.CDLL:
-    """Compile ``source`` once (cached by its hash) and load it."""
-    cc = find_compiler(compiler)
-    key = hashlib.sha256("\n".join([source, cc, " ".join(DEFAULT_FLAGS), ca.__version__]).encode()).hexdigest()[:20]
-    target = cache_dir() / f"torch_{name}_{key}{shared_library_suffix()}"
-    if not target.exists():
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix="nnfmu_bridge_", dir=target.parent) as tmp:
-            c_file = Path(tmp) / "bridge.c"
-            c_file.write_text(source)
-            built = compile_shared_library([c_file], Path(tmp) / target.name, compiler=cc,
-                                           what=f"compiling {name!r} for torch (physics backend 'compiled'; "
-                                                "use 'sx' where no C compiler is available)")
-            os.replace(built, target)  # atomic: a parallel run never loads a half-written library
-    lib = ctypes.CDLL(str(target))
+    """Compile ``source`` once (cached by its hash, :func:`nnfmu.cbuild.build_cached`) and load it."""
+    target = cbuild.build_cached(f"torch_{name}", source, flags=(*cbuild.DEFAULT_FLAGS, "-shared"), compiler=compiler,
+                                 what=f"compiling {name!r} for torch (physics backend 'compiled'; "
+                                      "use 'sx' where no C compiler is available)")
+    lib = cbuild.load(target)
     for entry in (lib.nnfmu_forward, lib.nnfmu_reverse):
         entry.restype = ctypes.c_int
         entry.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]

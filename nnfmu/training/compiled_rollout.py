@@ -27,10 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
 import os
-import platform
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -208,25 +205,14 @@ def _library_or_none(dtype: torch.dtype) -> ctypes.CDLL | None:
 
 def _library(dtype: torch.dtype) -> ctypes.CDLL:
     """Compile ``rollout.c`` for ``dtype`` once per machine (cached by source, flags and CPU) and load it."""
-    from nnfmu.export.compiler import find_compiler, run_compiler, shared_library_suffix
-    from nnfmu.physics.compiled import cache_dir
+    from nnfmu import cbuild
 
-    source, cc = _SOURCE.read_text(), find_compiler()
     flags = (*_FLAGS, f"-DNNFMU_REAL={_REALS[dtype]}")
-    key = hashlib.sha256("\n".join([source, cc, " ".join(flags), platform.machine(), _cpu_id()]).encode())
-    target = cache_dir() / f"rollout_{_REALS[dtype]}_{key.hexdigest()[:20]}{shared_library_suffix()}"
-    if not target.exists():
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix="nnfmu_rollout_", dir=target.parent) as tmp:
-            c_file, built = Path(tmp) / "rollout.c", Path(tmp) / target.name
-            c_file.write_text(source)
-            what = "compiling the recurrent free run (nnfmu/training/rollout.c)"
-            try:
-                run_compiler([*flags, str(c_file), "-o", str(built), "-lmvec", "-lm"], what=what)
-            except FmuBuildError:  # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
-                run_compiler([*flags, str(c_file), "-o", str(built), "-lm"], what=what)
-            os.replace(built, target)  # atomic: a parallel run never loads a half-written library
-    lib = ctypes.CDLL(str(target))
+    # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
+    target = cbuild.build_cached(f"rollout_{_REALS[dtype]}", _SOURCE.read_text(), flags=flags,
+                                 libs=(("-lmvec", "-lm"), ("-lm",)),
+                                 what="compiling the recurrent free run (nnfmu/training/rollout.c)")
+    lib = cbuild.load(target)
     header, path = [ctypes.c_int] * 8 + [ctypes.c_double], [ctypes.c_int] + [ctypes.c_void_p] * 3
     lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path
     lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 9 + path
@@ -234,13 +220,3 @@ def _library(dtype: torch.dtype) -> ctypes.CDLL:
     for entry in (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width):
         entry.restype = ctypes.c_int
     return lib
-
-
-def _cpu_id() -> str:
-    """What ``-march=native`` depends on: the CPU model and flags (a shared cache may serve other machines)."""
-    try:
-        text = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return platform.processor()
-    lines = [line for line in text.splitlines() if line.startswith(("model name", "flags"))]
-    return "\n".join(sorted(set(lines)))
