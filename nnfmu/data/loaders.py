@@ -15,6 +15,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from nnfmu.data.dataset import Channel, Dataset, Trajectories, make_trajectories
+from nnfmu.data.importing import load_files
+from nnfmu.data.tables import read_mat
 from nnfmu.errors import DataFileError, ShapeError
 
 ROBOT_TS = 0.1
@@ -27,24 +29,6 @@ RECUT_CAVEAT = (
     "per 606-sample piece, padded validation tail (trimmed here), and uncertain u/y alignment. "
     "Scores on it are near, not equal, to official benchmark figures; do not report them as official."
 )
-
-
-def _read_mat(path: Path) -> dict[str, np.ndarray]:
-    """Read a MATLAB file, v5 (scipy) or v7.3 (HDF5, transposed on disk)."""
-    import scipy.io
-
-    if not path.is_file():
-        raise DataFileError(f"{path} not found; give the path of the benchmark's .mat file")
-    try:
-        raw = scipy.io.loadmat(path)
-        return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
-    except NotImplementedError:  # MATLAB v7.3 is HDF5
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            return {k: np.asarray(f[k]).T for k in f.keys() if isinstance(f[k], h5py.Dataset)}
-    except (ValueError, OSError, TypeError, scipy.io.matlab.MatReadError) as exc:
-        raise DataFileError(f"{path} is not a readable MATLAB .mat file ({exc})") from exc
 
 
 def _channel_major(mat: dict, key: str, path: Path) -> np.ndarray:
@@ -75,7 +59,7 @@ def load_robot_benchmark(path: str | os.PathLike, *, recut_piece: int = RECUT_PI
     Returns a dataset with inputs ``tau1..tau6`` [N.m] and outputs ``q1..q6`` [deg].
     """
     path = Path(path)
-    mat = _read_mat(path)
+    mat = read_mat(path)
     needed = {"u_train", "y_train", "u_test", "y_test"}
     if not needed <= set(mat):
         raise DataFileError(
@@ -160,7 +144,5 @@ def load_csv(
     files is refused (it would silently score on the training data). ``options`` are those of
     :func:`nnfmu.data.importing.load_files` (``resample``, ``valid_fraction``, ``valid_trajectories``, ``seed``).
     """
-    from nnfmu.data.importing import load_files
-
     return load_files(files, inputs=inputs, outputs=outputs, Ts=Ts, time_column=time_column, units=units,
                       columns=columns, fmt="csv", **options)

@@ -212,9 +212,25 @@ def _is_number(text: str) -> bool:
 
 
 def _read_mat_table(path: Path) -> Table:
-    from nnfmu.data.loaders import _read_mat
+    return _from_arrays(path, read_mat(path))
 
-    return _from_arrays(path, _read_mat(path))
+
+def read_mat(path: Path) -> dict[str, np.ndarray]:
+    """Read a MATLAB file, v5 (scipy) or v7.3 (HDF5, transposed on disk)."""
+    import scipy.io
+
+    if not path.is_file():
+        raise DataFileError(f"{path} not found; give the path of an existing .mat file")
+    try:
+        raw = scipy.io.loadmat(path)
+        return {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
+    except NotImplementedError:  # MATLAB v7.3 is HDF5
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return {k: np.asarray(f[k]).T for k in f.keys() if isinstance(f[k], h5py.Dataset)}
+    except (ValueError, OSError, TypeError, scipy.io.matlab.MatReadError) as exc:
+        raise DataFileError(f"{path} is not a readable MATLAB .mat file ({exc})") from exc
 
 
 def _read_npz(path: Path) -> Table:
