@@ -12,8 +12,9 @@ the linear model's slowest time scale:
 - ``batch_size``: a quarter of the windows (or trajectories) of an epoch, 1 .. 64, so that an epoch
   makes at least about four optimiser steps;
 - the budget in optimiser steps: ``epochs`` and ``patience`` are :data:`BUDGET_STEPS` and
-  :data:`PATIENCE_STEPS` divided by the steps of an epoch (with ``max_minutes`` alone the time is the
-  budget);
+  :data:`PATIENCE_STEPS` divided by the steps of an epoch, within :data:`DEFAULT_MINUTES` of wall time
+  (a torch-looped TCN step on 10 x 400 samples took 1 s, so 3000 steps would take an hour); with
+  ``max_minutes`` alone the time is the budget;
 - ``valid_fraction`` (one record without a valid split): a tail long enough to rank models over a
   horizon like the test's, ``min(test length, 25 %)`` of the record and at least 10 %, plus the init
   window's samples, which are seen and not scored.
@@ -34,6 +35,7 @@ MIN_WINDOW = 200
 MAX_WINDOW = 2000
 BUDGET_STEPS = 3000
 PATIENCE_STEPS = 800
+DEFAULT_MINUTES = 10.0
 MAX_BATCH = 64
 
 
@@ -101,11 +103,14 @@ def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1
         return Plan(changes, lines)
     if "epochs" not in given:
         changes["epochs"] = max(1, math.ceil(BUDGET_STEPS / steps))
+        if "max_minutes" not in given:
+            changes["max_minutes"] = DEFAULT_MINUTES
     if "patience" not in given:
         changes["patience"] = max(1, math.ceil(PATIENCE_STEPS / steps))
     epochs, patience = changes.get("epochs", given.get("epochs")), changes.get("patience", given.get("patience"))
-    lines.append(f"budget: {epochs} epochs of {steps} optimiser steps, stopping after {patience} epochs without a "
-                 "better validation free run")
+    cap = changes.get("max_minutes", given.get("max_minutes"))
+    lines.append(f"budget: {epochs} epochs of {steps} optimiser steps" + (f", at most {cap:g} minutes" if cap else "")
+                 + f", stopping after {patience} epochs without a better validation free run")
     return Plan(changes, lines)
 
 
