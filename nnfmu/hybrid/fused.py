@@ -39,6 +39,7 @@ from nnfmu.errors import FmuBuildError
 from nnfmu.export.casadi_nets import ACTIVATIONS, activation_expr
 from nnfmu.hybrid.compiled_torch import CompiledFunction
 from nnfmu.physics import rk4_step
+from nnfmu.physics.rk4 import physics_step
 from nnfmu.training.compiled_rollout import ENV_SWITCH
 
 
@@ -106,8 +107,6 @@ def step_function(model) -> ca.Function:
     input_term = ca.mtimes(w1[:, n_x:], un) + b1  # constant over the step's RK4 stages, as in the torch model
     delta = _delta_function(model, modules, n_w)
     if config.correction == "step":
-        from nnfmu.hybrid.model import physics_step
-
         x_next = physics_step(system, model.Ts, model.n_sub)(x, u, p) + model.Ts * delta(x, input_term, w)
     else:  # n_sub RK4 sub-steps of ode + delta, as a C loop over one sub-step (fold), not n_sub copies
         h = model.Ts / model.n_sub

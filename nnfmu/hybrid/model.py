@@ -38,7 +38,6 @@ import functools
 import math
 from typing import Mapping, NamedTuple
 
-import casadi as ca
 import torch
 from torch import nn
 from torch.nn import functional as F
@@ -50,6 +49,7 @@ from nnfmu.hybrid.fused import fused_step, weight_vector
 from nnfmu.models.base import StepModel
 from nnfmu.models.mlp import activation_module
 from nnfmu.physics import PhysicsSystem, rk4_step
+from nnfmu.physics.rk4 import physics_step
 from nnfmu.system import Variable
 
 
@@ -81,19 +81,6 @@ class PhysicsBridge:
 
     def __deepcopy__(self, memo) -> "PhysicsBridge":
         return self
-
-
-def physics_step(system: PhysicsSystem, Ts: float, n_sub: int) -> ca.Function:
-    """``{name}_rk4(x, u, p) -> x_next``: :func:`nnfmu.physics.rk4_step` over calls of the ODE Function.
-
-    An MX graph that calls ``system.ode`` ``4 n_sub`` times, so its C code (and that of its
-    reverse mode) holds the ODE once, not ``4 n_sub`` inlined copies: it compiles in about
-    a second instead of ten (valve) and stays small for the arm's 50 sub-steps.
-    """
-    x = ca.MX.sym("x", system.n_x)
-    u, p = ca.MX.sym("u", len(system.inputs)), ca.MX.sym("p", len(system.parameters))
-    x_next = rk4_step(system.ode, x, u, p, Ts=Ts, n_sub=n_sub)
-    return ca.Function(f"{system.name}_rk4", [x, u, p], [x_next], ["x", "u", "p"], ["x_next"])
 
 
 @functools.lru_cache(maxsize=None)
