@@ -57,7 +57,7 @@ CROSS_STAMP := $(VENV)/.nnfmu-zig-prepared
 cross-toolchain: $(CROSS_STAMP)
 
 $(CROSS_STAMP): $(STAMP)
-	-$(PY) -m nnfmu.export.platforms && touch $(CROSS_STAMP)
+	-$(PY) -m nnfmu.export.prepare_zig && touch $(CROSS_STAMP)
 
 # the documentation site (docs/, mkdocs.yml) into site/; --strict: a broken link or reference fails
 docs: setup

@@ -3,7 +3,7 @@
 Prints, per model and platform, the CPU seconds of the compiler processes (the system C compiler for
 the host, ``zig cc`` for the others; CasADi's code generation, the same for every platform, is
 counted apart) and the wall time of the whole export, then one export with every platform together.
-Run pinned to one core on a shared machine, with Zig's cache prepared (python -m nnfmu.export.platforms):
+Run pinned to one core on a shared machine, with Zig's cache prepared (python -m nnfmu.export.prepare_zig):
 
     taskset -c 0 python benchmarks/export_platforms.py
 
