@@ -9,7 +9,7 @@
 
 The state is ``x = [ h (the network's own layout; its fed-back output is y) | z ]``. ``A, B, b, C, d``
 are the identified linear baseline (:func:`nnfmu.linear.identify_linear`, moved into the network's
-normalised units by :meth:`LinearPathStepModel.set_linear`) and stay fixed: trained with the network
+normalised units by :func:`nnfmu.training.linear_start.start_linear_path`) and stay fixed: trained with the network
 at its learning rate, they moved the slider's validation free runs from 0.31 to 2-14 within 150
 epochs. With ``G = 0`` and ``alpha = 0`` the untrained model *is* the linear model, and training starts
 at its free-run error; the trainer keeps epoch 0 unless validation improves, so the kept weights are
@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from nnfmu.errors import ConfigError, ShapeError
+from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
@@ -62,37 +62,26 @@ class LinearPathStepModel(StepModel):
         self.register_buffer("lin_k0", torch.zeros(n))
         self._check_sizes()
 
-    # ---- the linear model, moved into normalised units ------------------------------------------
-    def set_linear(self, linear, state_scale=None) -> None:
-        """Start the path at ``linear`` (a :class:`nnfmu.linear.LinearModel` with the ``estimate`` rule).
+    # ---- the linear model, in normalised units ---------------------------------------------------
+    #: The arrays :meth:`set_path` takes: the fixed linear model, its initial-state rule and the correction's gains.
+    PATH_ARRAYS = ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d", "lin_Ky", "lin_Ku", "lin_k0", "lin_G", "alpha")
 
-        Call it after :meth:`set_normalisation`. ``state_scale`` (n_z,), optional: the typical size of each
-        linear state over the training data; the path's states are divided by it (better-conditioned steps).
-        The correction's gains ``alpha`` and ``G`` are reset to zero.
+    def set_path(self, values: Mapping) -> None:
+        """Set every array of :data:`PATH_ARRAYS` (normalised units; see the module docstring).
+
+        :func:`nnfmu.training.linear_start.start_linear_path` computes them from an identified linear model.
         """
-        from nnfmu.linear.statespace import init_gains
-
-        sys = linear.system
-        if linear.init != "estimate":
-            raise ConfigError(f"a linear path starts from the 'estimate' initial-state rule, got {linear.init!r}; "
-                              "identify the linear model with init='estimate'")
-        if sys.n_x != self.config.linear_order:
-            raise ShapeError(f"the linear model has {sys.n_x} states, the config's linear_order is "
-                             f"{self.config.linear_order}; build the config with linear_order={sys.n_x}")
-        f64 = lambda t: t.detach().double().numpy()  # noqa: E731
-        su, mu, sy, my = (f64(getattr(self, k)) for k in ("u_std", "u_mean", "y_std", "y_mean"))
-        D = np.ones(sys.n_x) if state_scale is None else np.asarray(state_scale, dtype=float)
-        if D.shape != (sys.n_x,) or not (np.isfinite(D).all() and (D > 0).all()):
-            raise ShapeError(f"state_scale must be {sys.n_x} positive finite values")
-        K_y, K_u, k_0 = init_gains(sys, linear.y_scale)
-        values = {"lin_A": sys.A * D[None, :] / D[:, None], "lin_B": sys.B * su[None, :] / D[:, None],
-                  "lin_b": (sys.B @ mu + sys.b) / D, "lin_C": sys.C * D[None, :] / sy[:, None],
-                  "lin_d": (sys.d - my) / sy, "lin_Ky": K_y * sy[None, :] / D[:, None],
-                  "lin_Ku": K_u * su[None, :] / D[:, None], "lin_k0": (K_y @ (my - sys.d) + K_u @ mu + k_0) / D,
-                  "alpha": np.zeros(self.config.n_y), "lin_G": np.zeros((sys.n_x, self.config.n_y))}
+        missing = set(self.PATH_ARRAYS) - set(values)
+        if missing:
+            raise ShapeError(f"set_path needs {', '.join(sorted(missing))} too")
         with torch.no_grad():
-            for name, value in values.items():
-                getattr(self, name).copy_(torch.as_tensor(value))
+            for name in self.PATH_ARRAYS:
+                target = getattr(self, name)
+                value = torch.as_tensor(np.asarray(values[name], dtype=np.float64))
+                if tuple(value.shape) != tuple(target.shape) or not torch.isfinite(value).all():
+                    raise ShapeError(f"{name} must be finite with shape {tuple(target.shape)}, got "
+                                     f"{tuple(value.shape)}")
+                target.copy_(value)
 
     def set_normalisation(self, stats) -> None:
         super().set_normalisation(stats)

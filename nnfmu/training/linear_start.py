@@ -1,9 +1,9 @@
 """Start a network on its linear path (``ModelConfig.linear_order > 0``) at the identified linear baseline.
 
 :func:`start_linear_path` gives each :class:`~nnfmu.models.linear_path.LinearPathStepModel` in a fresh model
-(one network or an ensemble's members) the linear model's matrices in its normalised units, with every linear
-state scaled to unit size over the training data; the correction starts at zero, so the fresh model
-simulates exactly the linear model.
+(one network or an ensemble's members) the linear model's matrices in its normalised units
+(:func:`path_arrays`), with every linear state scaled to unit size over the training data; the correction
+starts at zero, so the fresh model simulates exactly the linear model.
 """
 
 from __future__ import annotations
@@ -49,8 +49,29 @@ def start_linear_path(model: StepModel, dataset: Dataset, linear=None):
     if names != [dataset.input_names, dataset.output_names]:
         raise ConfigError(f"the linear model was identified on inputs {names[0]} and outputs {names[1]}, the dataset "
                           f"has {dataset.input_names} and {dataset.output_names}; identify it on this dataset")
+    if linear.init != "estimate":
+        raise ConfigError(f"a linear path starts from the 'estimate' initial-state rule, got {linear.init!r}; "
+                          "identify the linear model with init='estimate'")
     scale = linear_state_scale(linear, dataset.train)
-    paths = [m for m in model.modules() if isinstance(m, LinearPathStepModel)]
-    for path in paths:
-        path.set_linear(linear, state_scale=scale)
+    for path in (m for m in model.modules() if isinstance(m, LinearPathStepModel)):
+        path.set_path(path_arrays(linear, path, scale))
     return linear
+
+
+def path_arrays(linear, path: LinearPathStepModel, state_scale: np.ndarray) -> dict:
+    """The linear model in ``path``'s normalised units, its states divided by ``state_scale``; zero corrections.
+
+    With ``u = s_u un + m_u``, ``y = s_y yn + m_y`` and ``x = D z``: ``A_n = D^-1 A D``, ``B_n = D^-1 B s_u``,
+    ``b_n = D^-1 (B m_u + b)``, ``C_n = s_y^-1 C D``, ``d_n = (d - m_y) / s_y``, and the ``estimate`` rule
+    ``z0 = D^-1 (K_y (s_y yn0 + m_y - d) + K_u (s_u un0 + m_u) + k_0)``.
+    """
+    from nnfmu.linear.statespace import init_gains
+
+    sys, D = linear.system, np.asarray(state_scale, dtype=float)
+    su, mu, sy, my = (getattr(path, k).detach().double().cpu().numpy() for k in ("u_std", "u_mean", "y_std", "y_mean"))
+    K_y, K_u, k_0 = init_gains(sys, linear.y_scale)
+    return {"lin_A": sys.A * D[None, :] / D[:, None], "lin_B": sys.B * su[None, :] / D[:, None],
+            "lin_b": (sys.B @ mu + sys.b) / D, "lin_C": sys.C * D[None, :] / sy[:, None], "lin_d": (sys.d - my) / sy,
+            "lin_Ky": K_y * sy[None, :] / D[:, None], "lin_Ku": K_u * su[None, :] / D[:, None],
+            "lin_k0": (K_y @ (my - sys.d) + K_u @ mu + k_0) / D,
+            "lin_G": np.zeros((sys.n_x, len(my))), "alpha": np.zeros(len(my))}
