@@ -166,7 +166,7 @@ def test_each_base_line_reaches_the_work(work, tmp_path, capsys):
 #: What each path-like option of a command is: read (an input) or written (an output). Every option that takes a
 #: string and has no fixed choices must be listed here or in TEXT, so that a new one joins the cases below.
 INPUTS = {"data": "data", "checkpoint": "ckpt", "fmus": "fmu", "path": "data", "files": "csv", "test": "csv2",
-          "valid": "csv2", "physics_params": None}
+          "valid": "csv2", "physics_params": None, "linear_path": None}
 OUTPUTS = {"out", "json", "plots", "save", "storage"}
 TEXT = {"target_isa", "platforms", "name", "address", "device", "grid", "size", "inputs", "outputs", "units", "time",
         "Ts_column", "fs_column", "test_columns", "valid_columns", "train_physics", "data_dir", "increment"}

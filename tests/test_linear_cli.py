@@ -74,5 +74,5 @@ def test_missing_dataset_and_bad_order(tmp_path, data_dir, capsys):
     assert main(["linear", "--data", str(tmp_path / "nope"), "--save", str(tmp_path / "m.json")]) == 2
     assert "not found" in capsys.readouterr().err
     assert main(["linear", "--data", str(data_dir), "--order", "0", "--save", str(tmp_path / "m.json")]) == 2
-    assert "order must be a positive integer" in capsys.readouterr().err
+    assert "--order must be a whole number >= 1" in capsys.readouterr().err
     assert not (tmp_path / "m.json").exists()

@@ -76,7 +76,7 @@ def test_resume_continues_from_the_checkpoint(data_dir, tmp_path, capsys):
     (["--arch", "gru"], "exists; pass --resume to continue it, --force to overwrite it"),
     (["--resume"], "not an nnfmu checkpoint"),
     (["--arch", "gru", "--force", "--window", "3"], "window must be 1"),
-    (["--arch", "gru", "--force", "--epochs", "0"], "epochs must be an integer >= 1"),
+    (["--arch", "gru", "--force", "--epochs", "0"], "--epochs must be a whole number >= 1"),
 ])
 def test_bad_options_give_one_line_errors(data_dir, tmp_path, capsys, argv, message):
     out = tmp_path / "exists.pt"

@@ -111,8 +111,8 @@ def check_value(flag: str, value, rule: Rule) -> None:
         raise ConfigError(f"{flag} {_num(value)} is above nnfmu's limit of {_num(hi, ',')} ({rule.constant}); choose a "
                           f"smaller {flag}" + (f" ({rule.fix})" if rule.fix else ""))
     if bad or above:
-        raise ConfigError(f"{flag} must be {_bounds(rule, whole)}, got {value!r}" + (f"; {rule.fix}" if rule.fix
-                                                                                    else ""))
+        fix = f"; {rule.fix}" if rule.fix and not rule.constant else ""  # with a constant, fix is for above
+        raise ConfigError(f"{flag} must be {_bounds(rule, whole)}, got {value!r}{fix}")
 
 
 def numeric_actions(parser: argparse.ArgumentParser) -> list[argparse.Action]:

@@ -67,7 +67,6 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
-    from nnfmu.limits import MAX_LINEAR_ORDER, check_at_most
     from nnfmu.linear import LinearConfig, identify_linear
 
     if not args.out and not args.save:
@@ -75,8 +74,6 @@ def _run(args: argparse.Namespace) -> int:
                           "or both")
     if not args.name.isidentifier():
         raise ConfigError(f"--name must be a C identifier (letters, digits, '_'), got {args.name!r}")
-    for option, value in (("--order", args.order), ("--max-order", args.max_order)):
-        check_at_most(option, value, MAX_LINEAR_ORDER, "MAX_LINEAR_ORDER")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           refine=not args.no_refine, refine_x0=args.refine_x0,
                           refine_method=args.refine_method, max_evaluations=args.max_evaluations,

@@ -41,12 +41,7 @@ def physics_system(name: str):
 
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import check_writable
-    from nnfmu.errors import ConfigError
-    from nnfmu.limits import MAX_RK4_SUBSTEPS, check_at_most
 
-    if args.n_sub is not None and args.n_sub < 1:
-        raise ConfigError(f"--n-sub must be a positive number of RK4 sub-steps, got {args.n_sub}")
-    check_at_most("--n-sub", args.n_sub, MAX_RK4_SUBSTEPS, "MAX_RK4_SUBSTEPS")
     check_fmu_options(args)
     out = Path(args.out or f"{args.system}.fmu")
     check_writable(out)
