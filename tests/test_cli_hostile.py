@@ -34,7 +34,8 @@ ACCEPTED = {
 }
 #: Work that a command starts once its arguments are accepted; each is replaced by WorkStarted.
 WORK = ["nnfmu.training.train", "nnfmu.training.train_seeds", "nnfmu.linear.identify_linear",
-        "nnfmu.export.build_fmu", "nnfmu.cosim.simulate_split", "nnfmu.study.reproduce", "nnfmu.study.run_demo",
+        "nnfmu.export.build_fmu", "nnfmu.cosim.simulate_split", "nnfmu.study.run_demo",
+        "nnfmu.study.pipeline.Study.check_manifest",  # reproduce: after its own input checks, before any cell
         "nnfmu.study.tune_architecture", "nnfmu.physics.generate_dataset", "nnfmu.data.save_dataset"]
 
 

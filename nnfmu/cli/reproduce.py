@@ -51,13 +51,6 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.study import reproduce
 
     check_writable(Path(args.out) / "results.md")  # before the study's first cell
-    if args.data is not None:  # the study reads it only once its data cell runs: say what is wrong now
-        data = Path(args.data)
-        if not data.exists() or (data.is_file() and data.stat().st_size == 0):
-            from nnfmu.errors import DataFileError
-
-            raise DataFileError(f"--data {data} is {'empty' if data.exists() else 'not found'}; give a dataset "
-                                "folder or the robot benchmark's .mat file")
     result = reproduce(args.system, args.out, budget=args.budget, data=args.data, tune=args.tune, seed=args.seed,
                        address=args.address, progress=not args.quiet, jobs=args.jobs, device=args.device,
                        threads=args.threads)
