@@ -17,7 +17,7 @@ import torch
 from fmu_cases import MODELS
 from test_cli_contract import file_size_limit
 
-from nnfmu.cli import build_parser, run
+from nnfmu.cli import build_parser, command_parser, run
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.data import Channel, from_arrays, save_dataset
 from nnfmu.errors import ConfigError
@@ -168,6 +168,12 @@ def test_warnings_are_dropped_when_the_command_fails_and_shown_when_it_succeeds(
 def test_help_is_readable():
     text = build_parser().format_help()
     assert "fit %, R2, RMSE and MAE" in text and "option_strings" not in text
+    evaluate = command_parser(build_parser(), "evaluate").format_help()
+    assert "fit % = 100 (1 - NRMSE)" in " ".join(evaluate.split())
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    for name, parser in sub.choices.items():  # every command's help: no escaped or garbled percent signs
+        text = parser.format_help()
+        assert "%%" not in text and "option_strings" not in text, name
 
 
 def test_evaluate_prints_r2_and_mae_and_out_of_range_only_when_there_is_some(work, tmp_path, capsys):

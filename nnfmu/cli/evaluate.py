@@ -17,7 +17,7 @@ from nnfmu.atomic import write_text_atomic
 _DESCRIPTION = (
     "Co-simulate FMUs in fmpy on a dataset split, each trajectory from its measured initial outputs, and score "
     "them: NRMSE (RMSE over the standard deviation of the measurement, per output, then the mean over outputs and "
-    "trajectories), fit %% = 100 (1 - NRMSE), R2 = 1 - NRMSE^2 (the coefficient of determination, averaged like "
+    "trajectories), fit % = 100 (1 - NRMSE), R2 = 1 - NRMSE^2 (the coefficient of determination, averaged like "
     "the NRMSE), and the RMSE and MAE of each output in its own unit."
 )
 
