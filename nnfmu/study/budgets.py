@@ -64,6 +64,11 @@ SYSTEMS = ("valve", "arm", "robot", "slider")
 STUDY_BUDGETS = ("smoke", "quick", "paper")
 
 
+def network_name(arch: str, strategy: str) -> str:
+    """File stem of a network's checkpoint, FMU and score: ``gru-parallel``, ``gru-series-parallel``."""
+    return f"{arch}-{strategy}"
+
+
 @dataclass(frozen=True, kw_only=True)
 class Budget:
     """Everything a study of one system at one budget needs, except the seed.

@@ -15,7 +15,8 @@ search, which spreads its own trials) run in this process.
   wrote, which this process writes atomically into the study folder.
 
 Each worker rebuilds the :class:`~nnfmu.study.pipeline.Study` from a plain
-description (:func:`study_spec`), so nothing but JSON-like data and file bytes
+description (:func:`study_spec`) with the function the pool was given
+(:func:`nnfmu.study.pipeline.study_from_spec`), so nothing but JSON-like data and file bytes
 crosses a process or machine boundary.
 """
 
@@ -31,6 +32,10 @@ from typing import Callable, Sequence
 from nnfmu.atomic import write_atomic
 from nnfmu.study.budgets import Budget, Hyper
 from nnfmu.study.cells import Cell, CellLog
+
+#: ``rebuild(spec, folder) -> Study``: :func:`nnfmu.study.pipeline.study_from_spec`, handed in by the study
+#: (a module-level function travels to a worker by reference), so this module does not import the pipeline.
+Rebuild = Callable[[dict, "str | Path"], object]
 
 
 def study_spec(study) -> dict:
@@ -49,22 +54,15 @@ def budget_from_json(doc: dict) -> Budget:
     return Budget(**doc)
 
 
-def _study(spec: dict, out: str | Path):
-    from nnfmu.study.pipeline import Study
-
-    return Study(spec["system"], out, budget_from_json(spec["budget"]), data=spec["data"], tune=spec["tune"],
-                 seed=spec["seed"], progress=False, echo=None, device=spec["device"], threads=spec["threads"])
-
-
 def _cell(study, key: str) -> Cell:
     return next(c for c in study.cells() if c.key == key)
 
 
-def run_in_place(spec: dict, key: str) -> str:
+def run_in_place(rebuild: Rebuild, spec: dict, key: str) -> str:
     """Run the cell ``key`` of the study folder ``spec['out']`` (a local worker process)."""
     from nnfmu.models.base import torch_threads
 
-    study = _study(spec, spec["out"])
+    study = rebuild(spec, spec["out"])
     with torch_threads(spec["threads"]):
         return _cell(study, key).run()
 
@@ -73,7 +71,7 @@ def _files(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
-def run_shipped(spec: dict, key: str, files: dict[str, bytes]) -> tuple[str, dict[str, bytes]]:
+def run_shipped(rebuild: Rebuild, spec: dict, key: str, files: dict[str, bytes]) -> tuple[str, dict[str, bytes]]:
     """Run the cell ``key`` in a temporary study folder holding ``files``; return its note and the files it wrote."""
     from nnfmu.models.base import torch_threads
 
@@ -83,7 +81,7 @@ def run_shipped(spec: dict, key: str, files: dict[str, bytes]) -> tuple[str, dic
             (root / rel).parent.mkdir(parents=True, exist_ok=True)
             (root / rel).write_bytes(data)
         before = {rel: (root / rel).stat().st_mtime_ns for rel in files}
-        study = _study(spec, root)
+        study = rebuild(spec, root)
         with torch_threads(spec["threads"]):
             note = _cell(study, key).run()
         written = {rel: data for rel, data in _files(root).items()
@@ -92,13 +90,14 @@ def run_shipped(spec: dict, key: str, files: dict[str, bytes]) -> tuple[str, dic
 
 
 class LocalPool:
-    """``jobs`` worker processes sharing the study folder."""
+    """``jobs`` worker processes sharing the study folder; each rebuilds the study with ``rebuild``."""
 
-    def __init__(self, jobs: int):
+    def __init__(self, jobs: int, rebuild: Rebuild):
         self.executor = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+        self.rebuild = rebuild
 
     def submit(self, spec: dict, cell: Cell, out: Path) -> cf.Future:
-        return self.executor.submit(run_in_place, spec, cell.key)
+        return self.executor.submit(run_in_place, self.rebuild, spec, cell.key)
 
     def close(self) -> None:
         self.executor.shutdown(wait=True, cancel_futures=True)
@@ -107,8 +106,8 @@ class LocalPool:
 class RayPool:
     """Cells as Ray tasks on the cluster this process is connected to; files travel with the tasks."""
 
-    def __init__(self, ray, cpus: float = 1.0, gpus: float = 0.0):
-        self.ray = ray
+    def __init__(self, ray, rebuild: Rebuild, cpus: float = 1.0, gpus: float = 0.0):
+        self.ray, self.rebuild = ray, rebuild
         self.task = ray.remote(num_cpus=cpus, num_gpus=gpus, max_retries=0)(run_shipped)
 
     def submit(self, spec: dict, cell: Cell, out: Path) -> cf.Future:
@@ -118,7 +117,7 @@ class RayPool:
             found = _files(path) if path.is_dir() else {"": path.read_bytes()}
             files.update({str((path / rel if rel else path).relative_to(out)): b for rel, b in found.items()})
         future: cf.Future = cf.Future()
-        ray_future = self.task.remote(spec, cell.key, files).future()
+        ray_future = self.task.remote(self.rebuild, spec, cell.key, files).future()
         ray_future.add_done_callback(lambda f: _settle(future, f, out))
         return future
 

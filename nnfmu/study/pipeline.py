@@ -25,15 +25,11 @@ from typing import Callable
 from nnfmu.atomic import write_text_atomic
 from nnfmu.errors import ConfigError, DataFileError
 from nnfmu.study import steps
-from nnfmu.study.budgets import SYSTEMS, Budget, Hyper, get_budget
+from nnfmu.study import parallel
+from nnfmu.study.budgets import SYSTEMS, Budget, Hyper, get_budget, network_name
 from nnfmu.study.cells import Cell, CellLog, run_cells
 
 TrainCallback = Callable[[str, int, dict], None]
-
-
-def network_name(arch: str, strategy: str) -> str:
-    """File stem of a network's checkpoint, FMU and score: ``gru-parallel``, ``gru-series-parallel``."""
-    return f"{arch}-{strategy}"
 
 
 @dataclass(frozen=True)
@@ -198,18 +194,16 @@ class Study:
     # ---- running ---------------------------------------------------------------------------------
     def _run_parallel(self) -> CellLog:
         """Up to ``jobs`` cells at once, in local processes or as Ray tasks (:mod:`nnfmu.study.parallel`)."""
-        from nnfmu.study import parallel
-
         if self.address:
             from nnfmu.study.ray_connect import ray_session
 
             ray = self._ray.enter_context(ray_session(self.address))
             self._ray_started = True
             gpus = 1.0 if self.device.startswith("cuda") else 0.0
-            pool = parallel.RayPool(ray, cpus=self.threads, gpus=gpus)
+            pool = parallel.RayPool(ray, study_from_spec, cpus=self.threads, gpus=gpus)
             jobs = self.jobs if self.jobs > 1 else max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))
         else:
-            pool, jobs = parallel.LocalPool(self.jobs), self.jobs
+            pool, jobs = parallel.LocalPool(self.jobs, study_from_spec), self.jobs
         try:
             return parallel.run_cells_parallel(self.cells(), pool, parallel.study_spec(self), self.out, jobs,
                                                echo=self.echo)
@@ -240,6 +234,12 @@ class Study:
             self._ray_started = False
         results = json.loads((self.out / "results.json").read_text())
         return StudyResult(self.out, log, results)
+
+
+def study_from_spec(spec: dict, out: str | Path) -> Study:
+    """The :class:`Study` a worker rebuilds from :func:`nnfmu.study.parallel.study_spec` in the folder ``out``."""
+    return Study(spec["system"], out, parallel.budget_from_json(spec["budget"]), data=spec["data"], tune=spec["tune"],
+                 seed=spec["seed"], progress=False, echo=None, device=spec["device"], threads=spec["threads"])
 
 
 def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", data: str | Path | None = None,

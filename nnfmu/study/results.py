@@ -17,6 +17,7 @@ from nnfmu.cosim import Evaluation
 from nnfmu.data import Dataset, load_dataset
 from nnfmu.metrics import nrmse
 from nnfmu.study import steps
+from nnfmu.study.budgets import network_name
 from nnfmu.study.report_md import render_markdown
 from nnfmu.training import STRATEGIES
 
@@ -42,8 +43,6 @@ def _score(ds: Dataset, study, name: str, label: str) -> tuple[dict, Evaluation 
 
 def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evaluation | None]:
     from nnfmu.models import load_checkpoint
-    from nnfmu.study.pipeline import network_name
-
     name = network_name(arch, strategy)
     ckpt_path = study.path("models", name)
     ckpt = load_checkpoint(ckpt_path)
