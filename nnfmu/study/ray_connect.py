@@ -77,6 +77,10 @@ def connect(ray, address: str) -> None:
     ray.init(address=address, log_to_driver=False)
 
 
+def _keep_loopback(host: str) -> str:
+    return "127.0.0.1" if host in LOOPBACK else host
+
+
 @contextlib.contextmanager
 def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpus: float | None = None,
                 quiet: bool = False):
@@ -88,9 +92,13 @@ def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpu
     if not ray.is_initialized():
         if address:
             connect(ray, address)
-        else:
-            ray.init(num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus, include_dashboard=False,
-                     log_to_driver=False, logging_level=logging.WARNING if quiet else logging.INFO)
+        else:  # a local instance listens on the loopback address only, as a loopback cluster does (see connect)
+            from ray._private import services
+
+            with mock.patch.object(services, "resolve_ip_for_localhost", _keep_loopback):
+                ray.init(num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus, include_dashboard=False,
+                         log_to_driver=False, _node_ip_address="127.0.0.1",
+                         logging_level=logging.WARNING if quiet else logging.INFO)
         started = True
     try:
         yield ray
