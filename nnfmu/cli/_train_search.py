@@ -1,0 +1,86 @@
+"""``nnfmu train --max-minutes N`` (without ``--epochs``, ``--patience``, ``--seeds``, ``--resume``, ``--increment``):
+the budget spent on a small early-stopping search (:mod:`nnfmu.study.time_search`), reported in one table.
+
+The search applies to networks (not ``--arch hybrid``); ``--arch`` is then optional and searched when left out.
+Every model or training option given stays fixed in every trial.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+# options of ``nnfmu train`` (argparse dests) that fix a knob or an option of every trial
+_FIXING = ("arch", "hidden", "layers", "window", "dropout", "init_window", "lr", "feedback_noise", "truncate")
+
+
+def applies(args: argparse.Namespace) -> bool:
+    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a network, in a new run."""
+    return (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
+            and args.seeds is None and not args.resume and args.increment is None and args.arch != "hybrid")
+
+
+def given_options(args: argparse.Namespace, given=()) -> set:
+    """The option names the user gave (``given`` plus the model options and ``--arch`` read from ``args``)."""
+    return set(given) | {name for name in _FIXING if getattr(args, name, None) is not None}
+
+
+def run_search(args: argparse.Namespace, ds, model_config, train_config, out, device, linear, given) -> int:
+    """Search, print the table and the kept model's test NRMSE; returns the exit status."""
+    from nnfmu.cli._train_variants import print_test
+    from nnfmu.errors import TrainingError
+    from nnfmu.study.time_search import search_for
+
+    if getattr(device, "type", str(device)) != "cpu":
+        print(f"note: the search trains its trials on the CPU cores, one each; --device {device} is not used")
+    minutes = train_config.max_minutes
+    fixed = given_options(args, given)
+    knobs = {"arch": "--arch", "hidden": "--hidden", "lr": "--lr", "feedback_noise": "--feedback-noise",
+             "truncate": "--truncate"}
+    searched = [flag for name, flag in knobs.items() if name not in fixed]
+    print(f"search: {minutes:g} min over {' '.join(searched) or 'nothing (every knob given)'}; trial 0 is the "
+          "plain training, ASHA stops the trials that trail the others at the same epoch")
+    result = search_for(ds, minutes, model_config=model_config, train_config=train_config, linear=linear,
+                        out=out, given=fixed, seed=train_config.seed, progress=not args.quiet)
+    print_table(result.rows, result.best)
+    if result.best is None:
+        raise TrainingError(f"no trial of the search finished an epoch in {minutes:g} minutes (starting Ray and "
+                            "its workers takes up to half a minute); give a larger --max-minutes, or --epochs N "
+                            "for one plain training")
+    kept = result.rows[result.best]
+    print(f"kept trial {result.best} ({kept['arch']}, hidden {kept['hidden']}, lr {kept['lr']:g}, feedback noise "
+          f"{kept['feedback_noise']:g}, {_window(kept['truncate'])}): validation free-run NRMSE "
+          f"{result.best_valid_nrmse:.4f}; checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)")
+    if result.test is None:
+        print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
+        return 0
+    print_test(ds, result.test, result.test_window, result.model_config["init_window"])
+    return 0
+
+
+def _window(truncate) -> str:
+    return "whole trajectories" if truncate is None else f"windows of {truncate}"
+
+
+def _cell(value, fmt: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return format(value, fmt)
+
+
+def print_table(rows: list, best: int | None) -> None:
+    """One row per trial: its settings, epochs run, best validation NRMSE, ASHA's stop, CPU seconds, how it ended."""
+    head = ("trial", "arch", "hidden", "lr", "noise", "window", "epochs", "valid NRMSE", "ASHA", "CPU-s", "end")
+    table = [head]
+    for r in rows:
+        table.append((f"{r['trial']}{'*' if r['trial'] == best else ''}", r["arch"], str(r["hidden"]),
+                      f"{r['lr']:g}", f"{r['feedback_noise']:g}", "whole" if r["truncate"] is None else
+                      str(r["truncate"]), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
+                      "stopped" if r["stopped"] else "-", _cell(r["cpu_s"], ".1f"),
+                      r["status"] if r["error"] is None else f"{r['status']}: {r['error']}"))
+    widths = [max(len(row[j]) for row in table) for j in range(len(head) - 1)]
+    for row in table:
+        print("  ".join(cell.rjust(w) if j else cell.ljust(w) for j, (cell, w) in enumerate(zip(row, widths)))
+              + "  " + row[-1])
+    if best is not None:
+        print("* kept: the lowest validation free-run NRMSE")
