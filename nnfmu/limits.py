@@ -5,7 +5,8 @@
 line checks sizes here first:
 
 - a network may have at most :data:`MAX_PARAMETERS` trainable parameters,
-  counted exactly by building it on torch's ``meta`` device (no memory);
+  counted exactly by building it on torch's ``meta`` device (no memory;
+  :func:`nnfmu.models.size.check_network_size`, which sits above the networks it builds);
 - ``--batch-size`` at most :data:`MAX_BATCH_SIZE` trajectories or windows;
 - ``nnfmu linear --order/--max-order`` at most :data:`MAX_LINEAR_ORDER` states;
 - ``nnfmu physics-fmu --n-sub`` at most :data:`MAX_RK4_SUBSTEPS` RK4 sub-steps per sample.
@@ -26,31 +27,6 @@ MAX_RK4_SUBSTEPS = 10_000
 #: trains until the wall-clock budget ends (``nnfmu train --max-minutes M`` alone), and its progress bar
 #: counts time instead of epochs.
 UNBOUNDED_EPOCHS = 10**9
-
-
-def count_parameters(model_config, meta: dict | None = None) -> int:
-    """Trainable parameters of the network ``model_config`` describes, counted without allocating them."""
-    import torch
-
-    from nnfmu.models.registry import build_model
-
-    config = model_config
-    if getattr(config, "arch", None) == "hybrid":  # the compiled physics backend would compile C first
-        config = config.replace(physics_backend="sx")
-    with torch.device("meta"):
-        model = build_model(config, meta)
-    return sum(p.numel() for p in model.parameters() if p.requires_grad)
-
-
-def check_network_size(model_config, meta: dict | None = None) -> int:
-    """Raise ConfigError if the network would exceed :data:`MAX_PARAMETERS`; return its parameter count."""
-    n = count_parameters(model_config, meta)
-    if n > MAX_PARAMETERS:
-        c = model_config
-        raise ConfigError(f"--hidden {c.hidden} with --layers {c.layers} gives a {c.arch.upper()} of {n:,} parameters "
-                          f"({n * 4 / 1e9:.3g} GB in float32), above nnfmu's limit of {MAX_PARAMETERS:,} "
-                          f"(nnfmu.limits.MAX_PARAMETERS); choose a smaller --hidden or --layers")
-    return n
 
 
 def check_at_most(option: str, value: int | None, limit: int, constant: str) -> None:

@@ -220,8 +220,9 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import check_writable
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
-    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most, check_network_size
+    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most
     from nnfmu.models import load_checkpoint
+    from nnfmu.models.size import check_network_size
 
     out = Path(args.out)
     check_writable(out)  # before the data are loaded and the network built
