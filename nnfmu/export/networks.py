@@ -28,6 +28,7 @@ import torch
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.export.ensemble import ensemble_to_casadi, with_y
+from nnfmu.export.exporters import exporter_for
 from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.models import tcn_state
@@ -114,10 +115,9 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     ExportError
         For a layer or model class the builders do not know, or a failed verification.
     """
-    if _is_hybrid(model):
-        from nnfmu.hybrid.export import hybrid_to_casadi
-
-        return hybrid_to_casadi(model, verify=verify)
+    exporter = exporter_for(model)
+    if exporter is not None:  # a model class of a package above export (nnfmu.hybrid), nnfmu.export.exporters
+        return exporter.to_casadi(model, verify=verify)
     if isinstance(model, EnsembleStepModel):
         init, step = ensemble_to_casadi(model, lambda member: to_casadi(member, verify=False))
         if verify:
@@ -205,10 +205,9 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
     records the architecture, its config and the checkpoint's provenance. A hybrid's
     physical parameters (their trained values) become the spec's parameters.
     """
-    if _is_hybrid(model):
-        from nnfmu.hybrid.export import hybrid_casadi_model
-
-        return hybrid_casadi_model(model, name=name)
+    exporter = exporter_for(model)
+    if exporter is not None:
+        return exporter.casadi_model(model, name=name)
     init, step = to_casadi(model)
     meta = model.meta
     channels = [{k: ch[k] for k in ("name", "unit", "description") if k in ch} for ch in meta["outputs"]]
@@ -222,11 +221,6 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         init_window=model.config.init_window,
     )
     return CasadiModel(init, step, spec)
-
-
-def _is_hybrid(model) -> bool:
-    """A :class:`nnfmu.hybrid.HybridStepModel` (physics + correction): exported by :mod:`nnfmu.hybrid.export`."""
-    return isinstance(model, StepModel) and model.config.arch == "hybrid"
 
 
 def _identifier(name: str) -> str:

@@ -18,11 +18,14 @@ from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_to
 from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, PHYSICS, HybridConfig, load_physics_params, physics_system
 from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
 from nnfmu.hybrid.model import HybridStepModel
+from nnfmu.export.exporters import register_exporter
 from nnfmu.models.architectures import register_architecture
 
-# models/ stays below hybrid/: the hybrid architecture registers itself (and is found through the
-# "nnfmu.architectures" entry point when a stored config names it before anything imported this package).
+# models/ and export/ stay below hybrid/: the hybrid architecture registers itself and its exporter (and is
+# found through the "nnfmu.architectures" entry point when a stored config names it before anything imported
+# this package).
 register_architecture(HYBRID_ARCH, config_class=HybridConfig, model_class=HybridStepModel)
+register_exporter(HybridStepModel, to_casadi=hybrid_to_casadi, casadi_model=hybrid_casadi_model)
 
 __all__ = [
     "BACKENDS",
