@@ -106,15 +106,6 @@ def estimate_rule_gradient(sys: StateSpace, x0: np.ndarray, y0: np.ndarray, u0: 
             "C": -mu @ xi.T - eta @ X.T}
 
 
-def rule_is_regular(sys: StateSpace) -> bool:
-    """Whether the estimate rule's problem has one solution (C of full row rank, (I - A) injective on null(C)):
-    then its KKT matrix is invertible and :func:`estimate_rule_gradient` is exact."""
-    n, n_y = sys.n_x, sys.C.shape[0]
-    K = np.block([[(np.eye(n) - sys.A).T @ (np.eye(n) - sys.A), sys.C.T], [sys.C, np.zeros((n_y, n_y))]])
-    sv = np.linalg.svd(K, compute_uv=False)
-    return bool(sv[-1] > 1e-9 * sv[0])
-
-
 def minimise_output_error(problem, max_evaluations: int):
     """Refine ``problem`` (a :class:`nnfmu.linear.refine._Problem`) by :func:`nnfmu.linear.quasi_newton.minimise`.
 

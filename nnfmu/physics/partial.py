@@ -51,8 +51,3 @@ class PartialTrajectories:
         if self.folder is None:
             return
         write_atomic(self._file(split, index), lambda tmp: np.savez(tmp, u=u, y=y), suffix=".npz")
-
-    def discard(self) -> None:
-        """Remove the folder once the dataset is safely written."""
-        if self.folder is not None:
-            shutil.rmtree(self.folder, ignore_errors=True)

@@ -171,17 +171,3 @@ def write_results(study) -> str:
             row = next(n for n in doc["networks"] if n["name"] == name)
             parts.append(f"best {strategy} {row['label']} {row['nrmse']:.4f}")
     return "; ".join(parts) or "no network was scored"
-
-
-def table_rows(doc: dict) -> list[tuple[str, float | None, float | None]]:
-    """(architecture, series-parallel NRMSE, parallel NRMSE) per architecture, in the study's order."""
-    rows = {}
-    for n in doc["networks"]:
-        rows.setdefault(n["arch"], {})[n["strategy"]] = n["nrmse"]
-    return [(arch, v.get("series-parallel"), v.get("parallel")) for arch, v in rows.items()]
-
-
-def finite_scores(doc: dict) -> np.ndarray:
-    """Every NRMSE of the document (networks and baselines); NaN where a model was not scored."""
-    vals = [n["nrmse"] for n in doc["networks"] + doc["baselines"]]
-    return np.array([np.nan if v is None else v for v in vals])
