@@ -242,10 +242,12 @@ class StepModel(nn.Module):
             raise ShapeError(f"{name} has shape {shape}, expected a tensor of shape {want}")
 
     # ---- sequences ---------------------------------------------------------------------------
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+                       output=None) -> torch.Tensor:
         """Free run in normalised units: (B, T, n_u), (B, n_y) -> (B, T, n_y), first row ``yn0``.
 
-        ``x0``: the initial state (default ``_init_norm(yn0, un[:, 0])``).
+        ``x0``: the initial state (default ``_init_norm(yn0, un[:, 0])``). ``output``: called once per step, in
+        order, on the step's output (B, n_y); what it returns is the output, fed back (a linear path's sum).
         """
         x = self._init_norm(yn0, un[:, 0]) if x0 is None else x0
         ys = [yn0]
@@ -255,6 +257,9 @@ class StepModel(nn.Module):
             x, yn = self._step_norm(x if fed is None else self._inject_y(x, fed), un[:, k])
             if fed is not None and self.config.increment:
                 yn = self._unshifted(yn, fed, ys[-1])
+                x = self._inject_y(x, yn)
+            if output is not None:
+                yn = output(yn)
                 x = self._inject_y(x, yn)
             ys.append(yn)
         return torch.stack(ys, dim=1)

@@ -111,6 +111,28 @@ class LinearPathStepModel(StepModel):
         yn = z_next @ self.lin_C.T + self.lin_d + self.alpha * n
         return torch.cat([self.net._inject_y(h_next, yn), z_next], dim=1), yn
 
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+                       output=None) -> torch.Tensor:
+        """The network's own (fast) free run, its every raw output turned into the path's output on the way.
+
+        Equal to the loop over :meth:`_step_norm`; the network's loop keeps its own state layout (the MLP's window
+        tensor: 2 concatenations a step instead of packing ``[h | z]``).
+        """
+        h0, z = (None, self._z0(yn0, un[:, 0])) if x0 is None else self._split(x0)
+        inputs = iter(un[:, :-1].unbind(1))
+
+        def path_output(n: torch.Tensor) -> torch.Tensor:
+            nonlocal z
+            z = z @ self.lin_A.T + next(inputs) @ self.lin_B.T + self.lin_b + n @ self.lin_G.T
+            yn = z @ self.lin_C.T + self.lin_d + self.alpha * n
+            return yn if output is None else output(yn)
+
+        self.net.feedback_noise = self.feedback_noise  # the network's loop disturbs what it feeds back
+        try:
+            return self.net._free_run_norm(un, yn0, h0, path_output)
+        finally:
+            self.net.feedback_noise = 0.0
+
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         h, z = self._split(x)
         return torch.cat([self.net._inject_y(h, yn), z], dim=1)

@@ -119,8 +119,10 @@ class RecurrentStepModel(StepModel):
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
-        """Free run without packing the state each step (same operations as :meth:`_step_norm`)."""
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+                       output=None) -> torch.Tensor:
+        """Free run without packing the state each step (same operations as :meth:`_step_norm`); ``output`` as in
+        :meth:`StepModel._free_run_norm`."""
         _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]) if x0 is None else x0)
         yn, ys, weights = yn0, [yn0], self._weights()
         noisy_increments = bool(self.feedback_noise and self.training and self.config.increment)
@@ -128,6 +130,7 @@ class RecurrentStepModel(StepModel):
             fed = self._feedback(yn)
             y_next, hs, cs = self._cell_step(fed, un_k, hs, cs, weights)
             yn = self._unshifted(y_next, fed, yn) if noisy_increments else y_next
+            yn = yn if output is None else output(yn)
             ys.append(yn)
         return torch.stack(ys, dim=1)
 

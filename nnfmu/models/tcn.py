@@ -97,8 +97,9 @@ class TCNStepModel(WindowStepModel):
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
-        return StepModel._free_run_norm(self, un, yn0, x0)  # the loop over the incremental step
+    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+                       output=None) -> torch.Tensor:
+        return StepModel._free_run_norm(self, un, yn0, x0, output)  # the loop over the incremental step
 
     def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
                              x0: torch.Tensor | None = None) -> torch.Tensor:
