@@ -34,6 +34,7 @@ import casadi as ca
 import numpy as np
 
 from nnfmu.errors import ShapeError
+from nnfmu.identifiers import is_c_identifier
 
 INIT_PORTS = (("y0", "u0"), ("x0",))
 STEP_PORTS = (("x", "u"), ("x_next", "y_next"))
@@ -58,8 +59,8 @@ class Variable:
     max: float | None = None
 
     def __post_init__(self) -> None:
-        if not self.name.isidentifier():
-            raise ShapeError(f"variable name {self.name!r} is not a C identifier; use letters, digits, '_'")
+        if not is_c_identifier(self.name):
+            raise ShapeError(f"variable name {self.name!r} is not a C identifier; use ASCII letters, digits, '_'")
         for bound in ("min", "max"):
             value = getattr(self, bound)
             if value is not None and not np.isfinite(value):
@@ -116,8 +117,8 @@ class SystemSpec:
             raise ShapeError(f"init_window must be a positive integer number of samples, got {self.init_window!r}")
         for attr in ("inputs", "outputs", "parameters"):
             object.__setattr__(self, attr, tuple(_as_variable(v) for v in getattr(self, attr)))
-        if not self.name.isidentifier():
-            raise ShapeError(f"model name {self.name!r} is not a C identifier; use letters, digits, '_'")
+        if not is_c_identifier(self.name):
+            raise ShapeError(f"model name {self.name!r} is not a C identifier; use ASCII letters, digits, '_'")
         if not (np.isfinite(self.Ts) and self.Ts > 0):
             raise ShapeError(f"sample time Ts must be positive seconds, got {self.Ts!r}")
         names = [v.name for v in self.inputs + self.outputs + self.parameters]

@@ -149,9 +149,10 @@ def _single(args: argparse.Namespace):
 def _channel_names(text: str | None, flag: str) -> list[str]:
     """nonlinear-benchmark: ``--inputs u`` names the channels (default u1, u2, ... and y1, y2, ...)."""
     from nnfmu.errors import ConfigError
+    from nnfmu.identifiers import is_c_identifier
 
     names = [t.strip() for t in (text or "").split(",") if t.strip()]
-    bad = [n for n in names if not n.isidentifier()]
+    bad = [n for n in names if not is_c_identifier(n)]
     if bad:
         raise ConfigError(f"{flag}: for nonlinear-benchmark it names the channels, one identifier per channel "
                           f"(e.g. {flag} u), got {bad}")
@@ -160,10 +161,10 @@ def _channel_names(text: str | None, flag: str) -> list[str]:
 
 def _named_after(ds, out: str):
     """The dataset named after its folder: models trained on it are called ``<folder>_<arch>``."""
-    import re
+    from nnfmu.identifiers import to_c_identifier
 
-    name = re.sub(r"\W+", "_", Path(out).resolve().name).strip("_") or "data"
-    return ds.replace(source={**ds.source, "name": f"d_{name}" if name[0].isdigit() else name})
+    name = to_c_identifier(Path(out).resolve().name, prefix="d_")
+    return ds.replace(source={**ds.source, "name": "data" if name == "d_" else name})
 
 
 def _run(args: argparse.Namespace) -> int:

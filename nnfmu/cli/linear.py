@@ -67,12 +67,13 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
     from nnfmu.errors import ConfigError
+    from nnfmu.identifiers import is_c_identifier
     from nnfmu.linear import LinearConfig, identify_linear
 
     if not args.out and not args.save:
         raise ConfigError("nothing to write; give -o MODEL.fmu for an FMU, --save MODEL.json for the matrices, "
                           "or both")
-    if not args.name.isidentifier():
+    if not is_c_identifier(args.name):
         raise ConfigError(f"--name must be a C identifier (letters, digits, '_'), got {args.name!r}")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           refine=not args.no_refine, refine_x0=args.refine_x0,

@@ -20,6 +20,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from nnfmu.errors import DataError, ShapeError
+from nnfmu.identifiers import is_c_identifier
 
 SPLIT_NAMES = ("train", "valid", "test")
 _STD_FLOOR = 1e-12
@@ -34,9 +35,9 @@ class Channel:
     description: str = ""
 
     def __post_init__(self) -> None:
-        if not self.name.isidentifier():
+        if not is_c_identifier(self.name):
             raise DataError(
-                f"channel name {self.name!r} is not an identifier; use letters, digits and "
+                f"channel name {self.name!r} is not an identifier; use ASCII letters, digits and "
                 "underscores, starting with a letter (it becomes an FMU variable name)"
             )
 

@@ -13,7 +13,6 @@ caller saves the finished dataset (atomically) with :func:`~nnfmu.data.save_data
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -25,6 +24,7 @@ from nnfmu.data.resample import decimate
 from nnfmu.data.sampling import common_sample_time, measured_step
 from nnfmu.data.tables import Table, format_of, read_table
 from nnfmu.errors import DataError
+from nnfmu.identifiers import to_c_identifier
 
 NO_TEST = ("no test split: every model is scored on held-out test data. Give test files (Python: "
            "files={'train': ..., 'test': ...}; CLI: --test FILE...) or the test columns of the same files "
@@ -92,8 +92,7 @@ def _override(base: tuple[Entry, ...], given, split: str) -> tuple[Entry, ...]:
 
 
 def _identifier(text: str) -> str:
-    name = re.sub(r"\W+", "_", text.strip()).strip("_")
-    return f"c_{name}" if not name or name[0].isdigit() else name
+    return to_c_identifier(text, prefix="c_")
 
 
 def _channel_names(table: Table, entry: Entry, columns: tuple[str, ...], role: str, position: int) -> list[str]:

@@ -35,12 +35,12 @@ FMU's behaviour is described in docs/fmu.md and docs/fmu-platforms.md.
 from __future__ import annotations
 
 import math
-import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 from nnfmu import __version__
 from nnfmu.errors import FmuBuildError
+from nnfmu.identifiers import is_c_identifier
 from nnfmu.system import SystemSpec, Variable
 from nnfmu.window_names import past_element, past_name
 
@@ -53,7 +53,6 @@ RESERVED_NAMES = ("time", "Ts", "max_samples_per_step", "input_range_error")
 STEPPING_RULE = ("doStep(t, h) accepts any h > 0 and advances every sample instant t0 + k*Ts in (t, t+h] with the "
                  "inputs held; the outputs are those of the last sample reached. Inputs outside [min, max] give "
                  "a warning (input_range_error = true: an error)")
-_C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 @dataclass(frozen=True)
@@ -140,7 +139,7 @@ class FmuDescription:
 
 def check_spec(spec: SystemSpec) -> None:
     """Raise FmuBuildError if ``spec`` cannot become an FMU (C identifier, finite starts, names, ranges)."""
-    if not _C_IDENTIFIER.fullmatch(spec.name):
+    if not is_c_identifier(spec.name):
         raise FmuBuildError(
             f"the model name {spec.name!r} becomes the FMU's modelIdentifier and must be an ASCII C "
             f"identifier; rename it (letters a-z, A-Z, digits, '_')")

@@ -19,7 +19,6 @@ computation ``to_casadi`` does not know raises :class:`~nnfmu.errors.ExportError
 from __future__ import annotations
 
 import copy
-import re
 
 import casadi as ca
 import numpy as np
@@ -30,6 +29,7 @@ from nnfmu.export import casadi_nets as nets
 from nnfmu.export.ensemble import ensemble_to_casadi, with_y
 from nnfmu.export.exporters import exporter_for
 from nnfmu.export.init_window import init_function, relative_taps
+from nnfmu.identifiers import to_c_identifier
 from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
 from nnfmu.models import tcn_state
 from nnfmu.models.linear_path import LinearPathStepModel, y_slot
@@ -212,7 +212,7 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
     meta = model.meta
     channels = [{k: ch[k] for k in ("name", "unit", "description") if k in ch} for ch in meta["outputs"]]
     spec = SystemSpec(
-        name=_identifier(name or meta.get("name") or f"{model.config.arch}_model"),
+        name=to_c_identifier(name or meta.get("name") or f"{model.config.arch}_model"),
         Ts=float(meta["Ts"]),
         inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the valid range
         outputs=with_starts([Variable(**ch) for ch in channels], model.y_mean),  # y0: the training mean
@@ -221,11 +221,6 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         init_window=model.config.init_window,
     )
     return CasadiModel(init, step, spec)
-
-
-def _identifier(name: str) -> str:
-    ident = re.sub(r"\W", "_", str(name))
-    return ident if ident[:1].isalpha() else f"m_{ident}"
 
 
 def _provenance(model: StepModel) -> dict:

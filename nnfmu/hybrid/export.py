@@ -18,7 +18,6 @@ parameters whose start values are the trained ones. :func:`nnfmu.export.to_casad
 from __future__ import annotations
 
 import copy
-import re
 
 import casadi as ca
 import numpy as np
@@ -28,6 +27,7 @@ from torch import nn
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
+from nnfmu.identifiers import to_c_identifier
 from nnfmu.physics import rk4_step
 from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables, with_starts
@@ -117,7 +117,7 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
     init, step = hybrid_to_casadi(model)
     meta, prov = model.meta, model.provenance or {}
     spec = SystemSpec(
-        name=_identifier(name or meta.get("name") or f"{model.physics.name}_hybrid"),
+        name=to_c_identifier(name or meta.get("name") or f"{model.physics.name}_hybrid"),
         Ts=model.Ts,
         inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the training range
         outputs=with_starts([Variable(ch["name"], ch.get("unit", ""), ch.get("description", ""))
@@ -147,8 +147,3 @@ def hybrid_dynamics(model: HybridStepModel) -> ContinuousDynamics | None:
     ode = ca.Function("ode", [x, u, p], [system.ode(x, u, p) + delta(x, u)], ["x", "u", "p"], ["xdot"])
     output = ca.Function("output", [x, p], [system.output(x, p)], ["x", "p"], ["y"])
     return ContinuousDynamics(ode=ode, output=output, states=system.states, nominals=system.state_scales)
-
-
-def _identifier(name: str) -> str:
-    ident = re.sub(r"\W", "_", str(name))
-    return ident if ident[:1].isalpha() else f"m_{ident}"
