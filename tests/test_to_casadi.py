@@ -18,7 +18,7 @@ NORM = {"u_mean": [100.0, 120.0], "u_std": [70.0, 60.0], "y_mean": [5e-4, 4e5], 
 
 
 @pytest.fixture(scope="module")
-def test_inputs(valve_small):
+def valve_inputs(valve_small):
     """3500 steps of measured valve inputs and the measured y0."""
     u = np.concatenate(valve_small.test.u)[:N_STEPS]
     return u, valve_small.test.y[0][0]
@@ -44,8 +44,8 @@ def assert_same_free_run(model, u, y0):
 
 
 @pytest.mark.parametrize("arch", ARCHS)
-def test_trained_networks_free_run_in_casadi_equals_torch(trained_models, test_inputs, arch):
-    assert_same_free_run(trained_models[arch], *test_inputs)
+def test_trained_networks_free_run_in_casadi_equals_torch(trained_models, valve_inputs, arch):
+    assert_same_free_run(trained_models[arch], *valve_inputs)
 
 
 def random_model(arch: str, seed: int = 0, **options):
@@ -65,8 +65,8 @@ def random_model(arch: str, seed: int = 0, **options):
     ("mlp", dict(activation="silu", skip=False)),
     ("mlp", dict(activation="sigmoid", layers=1, window=1)),
 ])
-def test_architecture_variants_free_run_equal(test_inputs, arch, options):
-    assert_same_free_run(random_model(arch, **options), *test_inputs)
+def test_architecture_variants_free_run_equal(valve_inputs, arch, options):
+    assert_same_free_run(random_model(arch, **options), *valve_inputs)
 
 
 @pytest.mark.parametrize("arch", ARCHS)

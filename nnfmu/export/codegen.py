@@ -3,7 +3,8 @@
 CasADi's generated C is correct but slow for dense networks: 92 % of a GRU-64
 step sits in its dense matrix-product helper, which walks the weight matrix
 row-wise (stride ``nrow``) and gives the compiler no ``restrict``, so
-``gcc -O3`` cannot vectorise it (see ``shared/reference/step-speed.md``).
+``gcc -O3`` cannot vectorise it (measured on the MX code of a GRU-64; docs/fmu-speed.md has
+the profiles' step times).
 Both profiles replace that helper with one whose inner loop runs over the
 contiguous row index with ``restrict`` pointers; every element of the result
 still adds its products in CasADi's order.
