@@ -44,13 +44,15 @@ def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str]) -> d
     work.mkdir(parents=True, exist_ok=True)
     fmus, cpu = {}, {}
     fmus["linear"] = work / "linear.fmu"
+    fmus["linear"].unlink(missing_ok=True)
     cpu["linear"] = _nnfmu("linear", "--data", str(data), "-o", str(fmus["linear"]), "--quiet")
     for arch in archs:
         ckpt = work / f"{arch}.pt"
         ckpt.unlink(missing_ok=True)
         cpu[arch] = _nnfmu("train", "--data", str(data), "--arch", arch, "-o", str(ckpt), "--quiet", *extra)
         fmus[arch] = work / f"{arch}.fmu"
-        _nnfmu("export", str(ckpt), "-o", str(fmus[arch]), "--force")
+        fmus[arch].unlink(missing_ok=True)
+        _nnfmu("export", str(ckpt), "-o", str(fmus[arch]))
     scores = work / "scores.json"
     _nnfmu("evaluate", "--data", str(data), *map(str, fmus.values()), "--json", str(scores))
     models = {Path(m["fmu"]).stem: m for m in json.loads(scores.read_text())["models"]}

@@ -7,13 +7,15 @@ than the mean). :func:`plan_training` chooses instead, from the number and lengt
 the linear model's slowest time scale:
 
 - ``truncate``: whole trajectories when the longest is at most two windows long, else windows of
-  ``clamp(10 tau, MIN_WINDOW, MAX_WINDOW)`` samples (``tau`` the slowest time constant in samples;
+  ``clamp(5 tau, MIN_WINDOW, MAX_WINDOW)`` samples (``tau`` the slowest time constant in samples, so
+  that an error of the initial state estimated at a window's start decays to under 1 % within it;
   an integrator or a pole at ``|z| >= 0.9999`` counts as :data:`MAX_WINDOW`);
 - ``batch_size``: a quarter of the windows (or trajectories) of an epoch, 1 .. 64, so that an epoch
   makes at least about four optimiser steps;
 - the budget in optimiser steps: ``epochs`` and ``patience`` are :data:`BUDGET_STEPS` and
   :data:`PATIENCE_STEPS` divided by the steps of an epoch, within :data:`DEFAULT_MINUTES` of wall time
-  (a torch-looped TCN step on 10 x 400 samples took 1 s, so 3000 steps would take an hour); with
+  (a compiled GRU makes thousands of steps a minute, a torch-looped TCN on 10 x 400 samples one a
+  second: the time is the budget that binds for slow networks); with
   ``max_minutes`` alone the time is the budget;
 - ``valid_fraction`` (one record without a valid split): a tail long enough to rank models over a
   horizon like the test's, ``min(test length, 25 %)`` of the record and at least 10 %, plus the init
@@ -33,8 +35,8 @@ from nnfmu.data import Dataset
 
 MIN_WINDOW = 200
 MAX_WINDOW = 2000
-BUDGET_STEPS = 3000
-PATIENCE_STEPS = 800
+BUDGET_STEPS = 20000
+PATIENCE_STEPS = 4000
 DEFAULT_MINUTES = 10.0
 MAX_BATCH = 64
 
@@ -58,7 +60,7 @@ def slowest_time_constant(linear) -> float:
 def _window(tau: float) -> int:
     if math.isnan(tau):
         return 4 * MIN_WINDOW
-    return MAX_WINDOW if math.isinf(tau) else int(min(max(10.0 * tau, MIN_WINDOW), MAX_WINDOW))
+    return MAX_WINDOW if math.isinf(tau) else int(min(max(5.0 * tau, MIN_WINDOW), MAX_WINDOW))
 
 
 def valid_fraction(ds: Dataset, init_window: int = 1) -> float | None:
