@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import re
+import time
 import types
 
 import pytest
@@ -128,8 +129,8 @@ def test_a_search_in_a_local_loopback_ray_keeps_the_best_trial(tmp_path, capsys,
 
     monkeypatch.setattr(time_search, "ray_session", watched_session)
     monkeypatch.setattr(time_search, "search_for", recorded_search)
+    args = _args(max_minutes=1.0, started=time.monotonic())  # the budget counts from the command's start
     ds = dataset(true_system(), noise=0.05)
-    args = _args(max_minutes=1.0)
     model = ModelConfig(arch="gru", n_u=ds.n_u, n_y=ds.n_y)
     train = TrainConfig(max_minutes=1.0, epochs=UNBOUNDED_EPOCHS, patience=0)
     given = {"max_minutes": 1.0}
@@ -193,3 +194,15 @@ def test_an_interrupted_search_keeps_the_best_finished_trial_or_nothing(finished
     if finished:
         assert load_checkpoint(out)["summary"]["search"] == {"trials": 2, "kept": 0}
         assert "search stopped (KeyboardInterrupt): the best trial so far, 0" in capsys.readouterr().out
+
+
+def test_without_ray_max_minutes_alone_trains_one_network_after_a_note(monkeypatch, capsys):
+    import sys
+
+    from nnfmu.cli import _train_search
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    monkeypatch.setattr(_train_search, "_noted", [])
+    assert not applies(_args()) and not applies(_args())
+    printed = capsys.readouterr().out
+    assert printed.count('searches with Ray Tune, which is not installed (pip install "nnfmu[tune]")') == 1

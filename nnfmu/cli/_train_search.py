@@ -15,9 +15,28 @@ _FIXING = ("arch", "hidden", "layers", "window", "dropout", "init_window", "lr",
 
 
 def applies(args: argparse.Namespace) -> bool:
-    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a network, in a new run."""
-    return (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
-            and args.seeds is None and not args.resume and args.increment is None and args.arch != "hybrid")
+    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a network, in a new run, with Ray installed.
+
+    Without Ray (the optional extra ``tune``) one network trains for the budget, as before, after a note.
+    """
+    wanted = (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
+              and args.seeds is None and not args.resume and args.increment is None and args.arch != "hybrid")
+    return wanted and _ray_installed()
+
+
+_noted: list = []
+
+
+def _ray_installed() -> bool:
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        if not _noted:
+            _noted.append(True)
+            print("note: --max-minutes alone searches with Ray Tune, which is not installed "
+                  "(pip install \"nnfmu[tune]\"); training one network for the budget instead")
+        return False
+    return True
 
 
 def given_options(args: argparse.Namespace, given=()) -> set:
@@ -26,7 +45,11 @@ def given_options(args: argparse.Namespace, given=()) -> set:
 
 
 def run_search(args: argparse.Namespace, ds, model_config, train_config, out, device, linear, given) -> int:
-    """Search, print the table and the kept model's test NRMSE; returns the exit status."""
+    """Search, print the table and the kept model's test NRMSE; returns the exit status.
+
+    ``args.started`` (optional): the :func:`time.monotonic` time the command started, so that the budget covers
+    loading the data and identifying the linear model too; without it the budget counts from this call.
+    """
     from nnfmu.cli._train_variants import print_test
     from nnfmu.errors import TrainingError
     from nnfmu.study.time_search import search_for
@@ -41,7 +64,8 @@ def run_search(args: argparse.Namespace, ds, model_config, train_config, out, de
     print(f"search: {minutes:g} min over {' '.join(searched) or 'nothing (every knob given)'}; trial 0 is the "
           "plain training, ASHA stops the trials that trail the others at the same epoch")
     result = search_for(ds, minutes, model_config=model_config, train_config=train_config, linear=linear,
-                        out=out, given=fixed, seed=train_config.seed, progress=not args.quiet)
+                        out=out, given=fixed, seed=train_config.seed, progress=not args.quiet,
+                        since=getattr(args, "started", None))
     print_table(result.rows, result.best)
     if result.best is None:
         raise TrainingError(f"no trial of the search finished an epoch in {minutes:g} minutes (starting Ray and "

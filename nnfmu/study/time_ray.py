@@ -18,13 +18,16 @@ from nnfmu.study.tune import METRIC
 
 
 class Asha(ASHAScheduler):
-    """ASHA (asynchronous successive halving) that records the point index of every trial it stops."""
+    """ASHA (asynchronous successive halving) that records the point index of every trial it stops, and the last
+    result of every trial (``last``: point index -> result dict)."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.stopped_points: set = set()
+        self.last: dict = {}
 
     def on_trial_result(self, tune_controller, trial, result):
+        self.last[int(trial.config["trial"])] = dict(result)
         decision = super().on_trial_result(tune_controller, trial, result)
         if decision == self.STOP:
             self.stopped_points.add(int(trial.config["trial"]))

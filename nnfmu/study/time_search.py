@@ -6,12 +6,14 @@ Ray instance, one CPU and one torch thread per trial, as many at once as there a
 every epoch; Ray Tune's ASHA scheduler stops the trials that trail the others at the same epoch (grace
 period: :data:`GRACE_STEPS` optimiser steps, at least 3 epochs). The whole search ends within the budget:
 
-- the budget counts from the call (Ray's start, about 10 s on 2 cores, included); :data:`END_RESERVE` of
-  it (at least 3 s) is kept for the last epochs to finish, Ray's shutdown and the copy of the best;
-- ``N = clamp(cpus * minutes_left / TRIAL_MINUTES, cpus, MAX_TRIALS)`` points are planned, each capped
-  at ``CAP_SHARE x`` its fair share of the time (ASHA ends most of them early), and never past the end;
-- no trial starts once less than half a cap (or :data:`MIN_TRIAL_S`) is left; Tune's own time budget
-  stops whatever still runs at the end.
+- the budget counts from the call, or from ``since`` (``nnfmu train``: from the command's start); Ray's start
+  (10-30 s on 2 busy cores) is part of it. :data:`END_RESERVE` of it (at least :data:`MIN_RESERVE_S`) is
+  kept for the last epochs to finish, Ray's shutdown and the copy of the best;
+- ``clamp(cpus * time left / TRIAL_MINUTES, cpus, MAX_TRIALS)`` trials are planned, each capped at
+  ``CAP_SHARE x`` its fair share of the time (ASHA ends most of them early), and never past the end;
+  a core whose trial ended takes the next point;
+- no trial starts once less than a quarter of a cap (or :data:`MIN_TRIAL_S`) is left; a trial stops after
+  an epoch when the next would end past the end; Tune's own time budget stops whatever still runs then.
 
 The trials validate on the validation split only (the test split stays in the driver); the trial with the
 lowest best validation NRMSE kept in its checkpoint wins, and its checkpoint, with its test scores added,
@@ -45,7 +47,8 @@ TRIAL_MINUTES = 0.5  # planned CPU-minutes per trial
 CAP_SHARE = 2.5
 MAX_TRIALS = 24
 MIN_TRIAL_S = 5.0
-GRACE_STEPS = 60
+GRACE_STEPS = 20
+THREAD_TIMEOUT_S = 60
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,8 @@ class TimeSearchResult:
 
 
 def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: TrainConfig, linear=None,
-               out, given=(), seed: int = 0, progress: bool = True, cpus: int | None = None) -> TimeSearchResult:
+               out, given=(), seed: int = 0, progress: bool = True, cpus: int | None = None,
+               since: float | None = None) -> TimeSearchResult:
     """Spend ``minutes`` on the search (module docstring); the best trial's checkpoint is written to ``out``.
 
     ``dataset`` has its validation split; ``model_config`` is the base network (its ``arch`` is trial 0's and is
@@ -80,8 +84,9 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     the planned training (``max_minutes`` is not used: ``minutes`` is the budget), ``linear`` the linear model
     of the linear path (or None), ``given`` the names of the options the user gave (kept as given). Ctrl-C,
     SIGTERM or an error during the search still writes the best finished trial to ``out``, then goes on.
+    ``since``: the :func:`time.monotonic` time the budget counts from (default: now; the CLI passes its start).
     """
-    started = time.monotonic()
+    started = time.monotonic() if since is None else since
     _, tune = require_ray()
     from nnfmu.study.time_ray import Asha, Echo, Points
 
@@ -115,7 +120,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
         job = {"points": points, "model_config": model_config.to_dict(), "train_config": train_config.to_dict(),
                "given": sorted(given), "folder": tmp, "cap_s": cap, "end": wall_end}
         scheduler = Asha(time_attr="epoch", max_t=10 ** 6, grace_period=grace, reduction_factor=2)
-        searcher = Points(len(points), end, max(MIN_TRIAL_S, cap / 2))
+        searcher = Points(len(points), end, max(MIN_TRIAL_S, cap / 4))
         trainable = tune.with_resources(tune.with_parameters(_trial, dataset=trials_ds, linear=linear, job=job),
                                         {"cpu": 1, "gpu": 0})
         run_config = tune.RunConfig(name="nnfmu-time-search", verbose=0, storage_path=str(Path(tmp) / "ray"),
@@ -128,8 +133,8 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
             tune.Tuner(trainable, run_config=run_config, tune_config=tune_config).fit()
         except BaseException as exc:  # Ctrl-C, SIGTERM or a failure: the best finished trial is still kept
             stopped_by = exc
-        rows = [_row(i, p, Path(tmp), i in scheduler.stopped_points) for i, p in enumerate(points)
-                if i < searcher.next]
+        rows = [_row(i, p, Path(tmp), i in scheduler.stopped_points, scheduler.last.get(i, {}))
+                for i, p in enumerate(points) if i < searcher.next]
         best, test, test_window, ckpt = _keep(rows, Path(tmp), dataset, out)
         if stopped_by is not None:
             if best is not None:
@@ -151,8 +156,11 @@ def _quiet_ray():
     for lg, level in loggers.items():
         lg.setLevel(level)
     try:
-        # Ctrl-C raises KeyboardInterrupt here (Ray Tune's own handler would end the search quietly)
-        with mock.patch.dict(os.environ, {"RAY_AIR_NEW_OUTPUT": "0", "TUNE_DISABLE_SIGINT_HANDLER": "1"}):
+        # Ctrl-C raises KeyboardInterrupt here (Ray Tune's own handler would end the search quietly); a worker
+        # whose trial ASHA stopped waits for it to write its checkpoint before the next trial (default 2 s: on
+        # busy cores the reuse failed and the next trial with it); the workers inherit this environment
+        with mock.patch.dict(os.environ, {"RAY_AIR_NEW_OUTPUT": "0", "TUNE_DISABLE_SIGINT_HANDLER": "1",
+                                          "TUNE_FUNCTION_THREAD_TIMEOUT_S": str(THREAD_TIMEOUT_S)}):
             yield
     finally:
         for lg, level in zip(loggers, levels):
@@ -194,7 +202,7 @@ def _trial(config: dict, dataset: Dataset | None = None, linear=None, job: dict 
         def report(epoch: int, metrics: dict) -> None:
             try:
                 tune.report({"epoch": epoch, "valid_nrmse": _finite(metrics["valid_nrmse"]),
-                             METRIC: _finite(metrics["best_valid_nrmse"])})
+                             METRIC: _finite(metrics["best_valid_nrmse"]), "cpu_s": time.process_time() - cpu0})
             except SystemExit:  # Ray stops this trial: keep what it has, in its checkpoint
                 stopped.append(epoch)
                 raise StopTraining from None
@@ -214,12 +222,12 @@ def _trial(config: dict, dataset: Dataset | None = None, linear=None, job: dict 
     (folder / f"trial-{i}.json").write_text(json.dumps(row))
 
 
-def _row(i: int, point: dict, folder: Path, stopped: bool) -> dict:
-    """The table row of trial ``i``: its knobs, and what its checkpoint and its own record say."""
+def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
+    """The table row of trial ``i``: its knobs, and what its checkpoint, its own record and its ``last`` report say."""
     from nnfmu.errors import CheckpointError
     from nnfmu.models import load_checkpoint
 
-    row = {"trial": i, **point, "epochs": 0, "best_valid_nrmse": None, "stopped": stopped, "cpu_s": None,
+    row = {"trial": i, **point, "epochs": 0, "best_valid_nrmse": None, "stopped": stopped, "cpu_s": last.get("cpu_s"),
            "status": "ended by Ray before it finished (the search's time was up)", "error": None}
     record = folder / f"trial-{i}.json"
     if record.is_file():
