@@ -20,6 +20,8 @@ import argparse
 from nnfmu.cli._resources import add_resource_options, check_resource_options
 from nnfmu.cli._train_plan import prepare as prepare_defaults
 from nnfmu.cli._train_plan import report_end
+from nnfmu.cli._train_search import applies as search_applies
+from nnfmu.cli._train_search import run_search
 from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
 from nnfmu.limits import UNBOUNDED_EPOCHS
 
@@ -53,9 +55,11 @@ _TRAIN_OPTIONS = (
      "drops the shorter tail, starts each window from its measured first output and shuffles all windows "
      "into batches"),
     ("--seed", "seed", int, "random seed (default 0)"),
-    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: none). Alone (without --epochs "
-     "and --patience) it means: train until the budget is spent and keep the best epoch; the progress bar shows "
-     "the time spent of it; with --epochs the bar counts epochs"),
+    ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: 10, with the step budget the "
+     "data give). Alone (without --epochs and --patience) it means: spend the budget on a small search (Ray Tune, "
+     "ASHA; architecture when --arch is left out, width, learning rate, feedback noise, window), keep the best on "
+     "validation and print the search as a table; without Ray installed, train until the budget is spent and keep "
+     "the best epoch. With --epochs the bar counts epochs"),
     ("--feedback-noise", "feedback_noise", float,
      "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
@@ -190,15 +194,16 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
             raise ConfigError(f"--resume continues the stored model {config}; the options {clash} differ. "
                               "Drop them, or train into a new --out file")
         return config
-    if args.arch is None:
-        raise ConfigError("--arch is required (mlp, rnn, lstm, gru, tcn or hybrid) unless --resume is given")
+    if args.arch is None and not search_applies(args):
+        raise ConfigError("--arch is required (mlp, rnn, lstm, gru, tcn or hybrid) unless --resume or "
+                          "--max-minutes alone (a search over the architectures too) is given")
     if arch == "hybrid":
         from nnfmu.hybrid import HybridConfig
 
         if "physics" not in given:
             raise ConfigError("--arch hybrid needs --physics valve or --physics arm (the physics model to correct)")
         return HybridConfig(n_u=ds.n_u, n_y=ds.n_y, **given)
-    return ModelConfig(arch=args.arch, n_u=ds.n_u, n_y=ds.n_y, **given)
+    return ModelConfig(arch=args.arch or "gru", n_u=ds.n_u, n_y=ds.n_y, **given)  # no --arch: searched
 
 
 def _differs(config, key: str, value) -> bool:
@@ -214,6 +219,7 @@ def _differs(config, key: str, value) -> bool:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import time
     from pathlib import Path
 
     from nnfmu.cli._checks import check_training_data
@@ -224,6 +230,7 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.models import load_checkpoint
     from nnfmu.models.size import check_network_size
 
+    args.started = time.monotonic()  # a --max-minutes search counts its budget from here
     out = Path(args.out)
     check_writable(out)  # before the data are loaded and the network built
     device = check_resource_options(args)
@@ -241,6 +248,8 @@ def _run(args: argparse.Namespace) -> int:
     if stored is None:
         given = {**_given(args, _TRAIN_OPTIONS), **({"join": True} if args.join else {})}
         ds, model_config, train_config, linear = prepare_defaults(args, ds, model_config, train_config, given)
+        if search_applies(args):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
+            return run_search(args, ds, model_config, train_config, out, device, linear, given)
     if args.increment == "auto":
         return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
     if args.seeds is not None:
