@@ -136,3 +136,16 @@ def test_cc_ccache_gcc_builds_every_compiled_path(tmp_path, monkeypatch):
         built = _compiled_paths(tmp_path)
     _check_built(built)
     assert any(os.scandir(tmp_path / "ccache")), "ccache compiled them"
+
+
+def test_without_a_compiler_the_physics_runs_uncompiled_with_one_warning(tmp_path, monkeypatch):
+    from nnfmu.physics.compiled import compile_function
+
+    monkeypatch.setenv("CC", "/nowhere/cc")
+    monkeypatch.setenv("NNFMU_CACHE_DIR", str(tmp_path))
+    x = ca.SX.sym("x")
+    fn = ca.Function("no_cc_physics", [x], [ca.sin(x)])
+    with pytest.warns(RuntimeWarning, match=r"^no_cc_physics runs uncompiled \(slower, same values\): "
+                                            r"no C compiler found: looked for '/nowhere/cc'") as record:
+        assert compile_function(fn) is fn
+    assert len(record) == 1 and "\n" not in str(record[0].message)
