@@ -187,17 +187,17 @@ def cpu_id() -> str:
 
 
 def build_cached(name: str, source: str, *, flags: Sequence[str] = DEFAULT_FLAGS,
-                 libs: Sequence[Sequence[str]] = (("-lm",),), compiler: Compiler = None,
+                 link_choices: Sequence[Sequence[str]] = (("-lm",),), compiler: Compiler = None,
                  what: str | None = None) -> Path:
     """The shared library of C ``source``, compiled once and then taken from :func:`cache_dir`.
 
     ``name`` starts the file name (``<name>_<hash><suffix>``); the hash covers the source, ``flags``,
-    ``libs``, the compiler command and :func:`cpu_id`. ``libs`` lists link options to try in order
+    ``link_choices``, the compiler command and :func:`cpu_id`. ``link_choices`` lists link options to try in order
     (``(("-lmvec", "-lm"), ("-lm",))``: the first that links is kept). ``flags`` must make a shared
     library (``-shared -fPIC``). Raises FmuBuildError (from :func:`run_compiler`) when no option builds.
     """
     cc = find_compiler(compiler)
-    key = hashlib.sha256("\n\0".join([source, cc, shlex.join(flags), repr(tuple(map(tuple, libs))),
+    key = hashlib.sha256("\n\0".join([source, cc, shlex.join(flags), repr(tuple(map(tuple, link_choices))),
                                       cpu_id()]).encode()).hexdigest()[:20]
     target = cache_dir() / f"{name}_{key}{shared_library_suffix()}"
     if target.exists():
@@ -206,13 +206,13 @@ def build_cached(name: str, source: str, *, flags: Sequence[str] = DEFAULT_FLAGS
     with tempfile.TemporaryDirectory(prefix=f".{name}_", dir=target.parent) as tmp:
         c_file, built = Path(tmp) / f"{name}.c", Path(tmp) / target.name
         c_file.write_text(source)
-        for i, link in enumerate(libs):
+        for i, link in enumerate(link_choices):
             try:
                 run_compiler([*flags, str(c_file), "-o", str(built), *link], what=what or f"compiling {name}",
                              compiler=compiler)
                 break
             except FmuBuildError:
-                if i == len(libs) - 1:
+                if i == len(link_choices) - 1:
                     raise
         os.replace(built, target)  # atomic: a parallel run never loads a half-written library
     return target

@@ -210,7 +210,7 @@ def _library(dtype: torch.dtype) -> ctypes.CDLL:
     flags = (*_FLAGS, f"-DNNFMU_REAL={_REALS[dtype]}")
     # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
     target = cbuild.build_cached(f"rollout_{_REALS[dtype]}", _SOURCE.read_text(), flags=flags,
-                                 libs=(("-lmvec", "-lm"), ("-lm",)),
+                                 link_choices=(("-lmvec", "-lm"), ("-lm",)),
                                  what="compiling the recurrent free run (nnfmu/training/rollout.c)")
     lib = cbuild.load(target)
     header, path = [ctypes.c_int] * 8 + [ctypes.c_double], [ctypes.c_int] + [ctypes.c_void_p] * 3
