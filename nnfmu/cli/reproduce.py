@@ -51,6 +51,10 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.study import reproduce
 
     check_writable(Path(args.out) / "results.md")  # before the study's first cell
+    if not args.address:  # on a cluster each cell's worker decides (see docs/scaling.md)
+        from nnfmu.training.resources import describe_device
+
+        print(f"device: {describe_device(args.device)}", flush=True)
     result = reproduce(args.system, args.out, budget=args.budget, data=args.data, tune=args.tune, seed=args.seed,
                        address=args.address, progress=not args.quiet, jobs=args.jobs, device=args.device,
                        threads=args.threads)

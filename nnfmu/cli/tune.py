@@ -15,6 +15,7 @@ import argparse
 import contextlib
 from pathlib import Path
 
+from nnfmu.cli._resources import add_device_option
 from nnfmu.cli._text import description
 
 _TRAIN_FLAGS = {"hidden": "--hidden", "layers": "--layers", "window": "--window", "dropout": "--dropout",
@@ -63,9 +64,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="no Ray trial tables or log lines: only the result (Ray's verbose=0, its and Optuna's "
                         "loggers at WARNING)")
     p.add_argument("--gpus-per-trial", type=float, default=None,
-                   help="GPUs for each trial, a fraction shares one (default: 1 with --device cuda, else 0)")
-    p.add_argument("--device", default="auto", metavar="auto|cpu|cuda",
-                   help="where the trials train: auto (a GPU when this machine has one; default), cpu or cuda")
+                   help="GPUs Ray reserves for each trial, a fraction shares one (default: 1 with --device cuda, "
+                        "or auto where Ray has a GPU; 0 with --device cpu, which refuses more)")
+    add_device_option(p, what="each trial", extra=" (a trial sees its reserved GPU alone, as cuda:0; cuda:N gives "
+                      "the local Ray instance this machine's GPU N alone; with --address, Ray picks each trial's GPU "
+                      "and cuda:N is refused)")
     p.set_defaults(func=_run)
 
 
@@ -116,6 +119,23 @@ def _cpus_per_trial(args: argparse.Namespace) -> float:
     return float(args.threads or args.cpus_per_trial or 1.0)
 
 
+def _device(args: argparse.Namespace) -> str:
+    """``--device`` checked before any work (a local search: against this machine's GPUs), with its line printed."""
+    from nnfmu.errors import ConfigError
+    from nnfmu.training.resources import check_ray_device, describe_device, resolve_device
+
+    device = check_ray_device(args.device, args.gpus_per_trial, args.address)
+    if args.address:
+        print(f"device: {device} (trials on the cluster at {args.address}; Ray reserves their GPUs)", flush=True)
+        return device
+    if resolve_device(device).type == "cpu" and (args.gpus_per_trial or 0) > 0:
+        raise ConfigError(f"--gpus-per-trial {args.gpus_per_trial:g}, but torch sees no CUDA device on this "
+                          "machine, so the trials would wait for a GPU forever; drop --gpus-per-trial")
+    seen = "; a trial sees its GPU as cuda:0 (Ray sets CUDA_VISIBLE_DEVICES)" if device != "cpu" else ""
+    print(f"device: {describe_device(device)}{seen}", flush=True)
+    return device
+
+
 @contextlib.contextmanager
 def _quiet_output():
     """--quiet: Ray Tune's reporter that honours verbose=0 (the newer one still prints its experiment box), and
@@ -146,11 +166,7 @@ def _run(args: argparse.Namespace) -> int:
     require_ray()  # before loading data: a missing extra is the first thing to say
     check_writable(args.out, args.storage and Path(args.storage) / "x")  # before any trial runs
     cpus_per_trial = _cpus_per_trial(args)
-    gpus = args.gpus_per_trial
-    if gpus is None:
-        from nnfmu.training.resources import resolve_device
-
-        gpus = 1.0 if resolve_device(args.device).type == "cuda" else 0.0
+    device = _device(args)
     ds = load_dataset(args.data)
     budget = get_budget(_system(args, ds), args.budget)
     grid = parse_grid(args.grid) if args.grid else budget.grid(args.arch)
@@ -159,7 +175,7 @@ def _run(args: argparse.Namespace) -> int:
                             max_minutes=args.max_minutes or budget.tune_max_minutes, samples=args.samples,
                             seed=args.seed, search=args.search, trials=args.trials, scheduler=args.scheduler,
                             grace_epochs=args.grace_epochs, cpus_per_trial=cpus_per_trial,
-                            gpus_per_trial=gpus)
+                            gpus_per_trial=args.gpus_per_trial, device=device)
     with _quiet_output() if args.quiet else contextlib.nullcontext():
         result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
                                    settings=settings, address=args.address, num_cpus=args.cpus,

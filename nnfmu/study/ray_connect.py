@@ -83,10 +83,12 @@ def _keep_loopback(host: str) -> str:
 
 @contextlib.contextmanager
 def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpus: float | None = None,
-                quiet: bool = False):
+                quiet: bool = False, cuda_visible: str | None = None):
     """Connect to the cluster at ``address`` or start a local Ray instance; stop what was started here.
 
-    ``quiet``: a local instance logs warnings and errors only (not "Started a local Ray instance")."""
+    ``quiet``: a local instance logs warnings and errors only (not "Started a local Ray instance").
+    ``cuda_visible``: the ``CUDA_VISIBLE_DEVICES`` a local instance starts with, e.g. ``"1"`` for
+    ``--device cuda:1``: Ray then hands out that GPU alone (seen as ``cuda:0`` in a task)."""
     ray, _ = require_ray()
     started = False
     if not ray.is_initialized():
@@ -95,7 +97,9 @@ def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpu
         else:  # a local instance listens on the loopback address only, as a loopback cluster does (see connect)
             from ray._private import services
 
-            with mock.patch.object(services, "resolve_ip_for_localhost", _keep_loopback):
+            gpus = {} if cuda_visible is None else {"CUDA_VISIBLE_DEVICES": cuda_visible}
+            with mock.patch.object(services, "resolve_ip_for_localhost", _keep_loopback), \
+                    mock.patch.dict(os.environ, gpus):
                 ray.init(num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus, include_dashboard=False,
                          log_to_driver=False, _node_ip_address="127.0.0.1",
                          logging_level=logging.WARNING if quiet else logging.INFO)

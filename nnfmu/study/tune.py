@@ -10,7 +10,8 @@ optional extra ``search``) that algorithm picks ``trials`` points among the
 grid's values, seeded. The ``asha`` scheduler stops trials early whose
 validation NRMSE trails the others' at the same epoch (asynchronous successive
 halving). Each trial gets ``cpus_per_trial`` CPUs (and as many torch threads)
-and ``gpus_per_trial`` GPUs (a fraction shares one; with any, it trains on CUDA).
+and trains on ``device`` with ``gpus_per_trial`` GPUs (default: from the device,
+:func:`~nnfmu.training.resources.gpus_per_training`; a trial sees its GPU as ``cuda:0``).
 The point with the lowest mean best-validation NRMSE wins.
 
 Ray is the optional extra ``tune`` (``pip install "nnfmu[tune]"``, or
@@ -41,6 +42,7 @@ from nnfmu.study.budgets import Hyper
 from nnfmu.atomic import write_text_atomic
 from nnfmu.study.ray_connect import MissingExtraError, ray_session, require_ray
 from nnfmu.training import STRATEGIES
+from nnfmu.training.resources import check_ray_device, cuda_visible, gpus_per_training
 
 METRIC = "best_valid_nrmse"
 SEARCHES = ("grid", "optuna", "hyperopt")
@@ -72,8 +74,12 @@ class TuneSettings:
         Run every trial to its end, or stop the trailing ones early (ASHA).
     grace_epochs : int
         ASHA: epochs every trial runs before it may be stopped.
-    cpus_per_trial, gpus_per_trial : float
-        Resources Ray reserves for one trial; a GPU fraction lets trials share a GPU.
+    cpus_per_trial : float
+        CPUs Ray reserves for one trial (and its torch threads).
+    device : {'cpu', 'auto', 'cuda', 'cuda:N'}
+        Where the trials train (default cpu); see the module docstring.
+    gpus_per_trial : float or None
+        GPUs Ray reserves for one trial (a fraction lets trials share one); None: from ``device``.
     """
 
     epochs: int = 10
@@ -86,7 +92,8 @@ class TuneSettings:
     scheduler: str = "fifo"
     grace_epochs: int = 1
     cpus_per_trial: float = 1.0
-    gpus_per_trial: float = 0.0
+    gpus_per_trial: float | None = None
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         for name, low in (("samples", 1), ("grace_epochs", 1)):
@@ -99,17 +106,15 @@ class TuneSettings:
                 raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(allowed)}")
         if not (isinstance(self.cpus_per_trial, (int, float)) and self.cpus_per_trial >= 1):
             raise ConfigError(f"cpus_per_trial must be >= 1, got {self.cpus_per_trial!r}")
-        if not (isinstance(self.gpus_per_trial, (int, float)) and self.gpus_per_trial >= 0):
+        if self.gpus_per_trial is not None and not (isinstance(self.gpus_per_trial, (int, float))
+                                                    and self.gpus_per_trial >= 0):
             raise ConfigError(f"gpus_per_trial must be >= 0 (a fraction shares a GPU), got {self.gpus_per_trial!r}")
+        object.__setattr__(self, "device", check_ray_device(self.device, self.gpus_per_trial))
 
     @property
     def threads(self) -> int:
         """Torch threads of one trial: its whole CPUs."""
         return max(1, int(self.cpus_per_trial))
-
-    @property
-    def device(self) -> str:
-        return "cuda" if self.gpus_per_trial > 0 else "cpu"
 
 
 @dataclass(frozen=True)
@@ -187,7 +192,7 @@ def _trial(config: dict, dataset: Dataset | None = None, job: dict | None = None
 
     try:
         train(dataset, hyper.model_config(job["arch"], dataset.n_u, dataset.n_y), train_config, callback=report,
-              device=settings.device, threads=settings.threads)
+              device=job["device"], threads=settings.threads)
     except TrainingError:  # a diverging configuration is a bad score, not a failed search
         tune.report({"epoch": 0, "valid_nrmse": math.inf, METRIC: math.inf})
 
@@ -224,13 +229,18 @@ def tune_architecture(dataset: Dataset, arch: str, *, strategy: str = "parallel"
         raise ConfigError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}")
     base, grid, settings = base or Hyper(), dict(grid or {}), settings or TuneSettings()
     check_grid(arch, base, grid, dataset.n_u, dataset.n_y)
-    job = {"arch": arch, "strategy": strategy, "base": base.to_dict(), "settings": dataclasses.asdict(settings)}
-    resources = {"cpu": settings.cpus_per_trial, "gpu": settings.gpus_per_trial}
-    trainable = tune.with_resources(tune.with_parameters(_trial, dataset=dataset, job=job), resources)
+    check_ray_device(settings.device, settings.gpus_per_trial, address)
     run_config = tune.RunConfig(name=f"nnfmu-{arch}-{strategy}", verbose=1 if progress else 0,
                                 storage_path=None if storage is None else str(Path(storage).resolve()))
     space, tune_config = _search(tune, grid, settings)
-    with ray_session(address, num_cpus, num_gpus=None if address else _local_gpus(settings), quiet=not progress):
+    with ray_session(address, num_cpus, num_gpus=None if address else _local_gpus(settings), quiet=not progress,
+                     cuda_visible=cuda_visible(settings.device)) as session:
+        gpus = gpus_per_training(settings.device, session.cluster_resources().get("GPU", 0), settings.gpus_per_trial)
+        # a trial that reserved a GPU sees it alone, renumbered cuda:0 (Ray sets CUDA_VISIBLE_DEVICES)
+        job = {"arch": arch, "strategy": strategy, "base": base.to_dict(), "settings": dataclasses.asdict(settings),
+               "device": "cuda" if gpus > 0 else "cpu"}
+        resources = {"cpu": settings.cpus_per_trial, "gpu": gpus}
+        trainable = tune.with_resources(tune.with_parameters(_trial, dataset=dataset, job=job), resources)
         results = tune.Tuner(trainable, param_space=space, run_config=run_config, tune_config=tune_config).fit()
         trials = [_trial_row(r, grid) for r in results]
     return _best(arch, strategy, base, grid, trials, ray.__version__)
@@ -270,8 +280,8 @@ def _search(tune, grid: Mapping[str, Sequence], settings: TuneSettings) -> tuple
 
 
 def _local_gpus(settings: TuneSettings) -> float | None:
-    """GPUs of a local Ray instance: none unless trials ask for them (then Ray detects them)."""
-    return None if settings.gpus_per_trial > 0 else 0
+    """GPUs of a local Ray instance: none for CPU trials; otherwise Ray detects them (those of CUDA_VISIBLE_DEVICES)."""
+    return 0 if gpus_per_training(settings.device, 1, settings.gpus_per_trial) == 0 else None
 
 
 def _trial_row(result, grid: Mapping) -> dict:
