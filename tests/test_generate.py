@@ -133,7 +133,7 @@ def test_arm_record_starts_at_rest_and_its_torques_produce_its_angles(arm_small)
     (["generate", "valve", "--size", "huge", "--out", "D"],
      "unknown size 'huge' for the valve; valid sizes are paper, small"),
     (["generate", "arm", "--size", "paper", "--out", "D"], "valid sizes are benchmark, small"),
-    (["generate", "valve", "--size", "small", "--seed", "-3", "--out", "D"], "seed must be a non-negative integer"),
+    (["generate", "valve", "--size", "small", "--seed", "-3", "--out", "D"], "--seed must be a whole number >= 0"),
     (["generate", "valve", "--size", "small", "--out", "blocker/D"], "is not a writable folder"),
     (["generate", "valve", "--size", "small", "--out", "existing"],
      "already exists; choose another folder or pass --force"),

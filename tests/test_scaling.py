@@ -35,7 +35,7 @@ def test_auto_takes_cuda_only_where_torch_sees_it(monkeypatch):
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the message on a machine without CUDA")
 @pytest.mark.parametrize("flags, message", [
     (["--device", "cuda"], "device 'cuda' asked for, but torch"),
-    (["--threads", "0"], "threads must be a positive integer"),
+    (["--threads", "0"], "--threads must be a whole number >= 1"),
 ])
 def test_train_cli_refuses_a_missing_gpu_or_bad_threads_in_one_line(valve_small_dir, tmp_path, capsys, flags,
                                                                      message):

@@ -173,7 +173,7 @@ class Study:
             self._ray_started = True
         b = self.budget
         settings = TuneSettings(epochs=b.tune_epochs, patience=b.tune_patience, max_minutes=b.tune_max_minutes,
-                                seed=self.seed)
+                                seed=self.seed, device=self.device)
         result = tune_architecture(load_dataset(self.data_dir), arch, strategy=strategy, base=b.hyper[arch],
                                    grid=b.grid(arch), settings=settings, address=self.address,
                                    storage=self.out / "tune" / "ray", progress=self.progress)
@@ -199,7 +199,9 @@ class Study:
 
             ray = self._ray.enter_context(ray_session(self.address))
             self._ray_started = True
-            gpus = 1.0 if self.device.startswith("cuda") else 0.0
+            from nnfmu.training.resources import gpus_per_training
+
+            gpus = gpus_per_training(self.device, ray.cluster_resources().get("GPU", 0))  # auto: one where there is
             pool = parallel.RayPool(ray, study_from_spec, cpus=self.threads, gpus=gpus)
             jobs = self.jobs if self.jobs > 1 else max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))
         else:
@@ -216,10 +218,13 @@ class Study:
 
             require_ray()  # a missing extra is said before any work, not after the data are made
         steps.check_source(self.system, self.source, self.data_dir)  # bad --data: say so and leave the folder alone
-        from nnfmu.training.resources import check_threads, resolve_device
+        from nnfmu.training.resources import check_threads, device_name, resolve_device
 
         check_threads(self.threads)
-        resolve_device(self.device)  # a missing GPU is said before any work
+        if self.address:  # the cluster's workers have the GPUs, not necessarily this driver
+            device_name(self.device)
+        else:
+            resolve_device(self.device)  # a missing GPU is said before any work
         self.check_manifest()
         from nnfmu.models.base import torch_threads
 
