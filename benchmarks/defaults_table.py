@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     p.add_argument("--max-minutes", type=float, help="the time budget of every training (default: none)")
     args = p.parse_args(argv)
     extra = [] if args.max_minutes is None else ["--max-minutes", str(args.max_minutes)]
-    print(f"| dataset | model | test NRMSE (fmpy) | / linear | CPU s |\n|---|---|---|---|---|", flush=True)
+    print("| dataset | model | test NRMSE (fmpy) | / linear | CPU s |\n|---|---|---|---|---|", flush=True)
     for data in args.datasets:
         rows = run_dataset(data, args.archs, args.work / data.name, extra)
         base = rows["linear"][0]

@@ -37,6 +37,7 @@ from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
 
+
 def inner_config(config: ModelConfig) -> ModelConfig:
     """The network on the path: the same architecture and sizes, raw output (no skip, no increment)."""
     return config.replace(linear_order=0, skip=False, increment=False, members=1)
