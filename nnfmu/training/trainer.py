@@ -223,7 +223,10 @@ def train(
     notes += valid_notes
     dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
-        model = _resumed_model(ckpt, model_config, out, dataset) if ckpt else _new_model(model_config, dataset, cfg, linear)
+        if ckpt:
+            model = _resumed_model(ckpt, model_config, out, dataset)
+        else:
+            model = _new_model(model_config, dataset, cfg, linear)
         model = model.to(dtype)
         _check_device(model, device)
         seqs = [(un.to(device), yn.to(device)) for un, yn in normalised_sequences(model, dataset.train, dtype, "train")]
