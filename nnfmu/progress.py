@@ -55,7 +55,16 @@ class _LogLines:
 
 
 def _in_notebook() -> bool:
-    return "ipykernel" in sys.modules  # its output area overwrites a line on a carriage return, like a terminal
+    """Whether this process is a Jupyter kernel (its output area overwrites a line on a carriage return, like a
+    terminal). ipykernel merely imported (a test suite that runs notebooks does) is not enough."""
+    ipython = sys.modules.get("IPython")
+    if "ipykernel" not in sys.modules or ipython is None:
+        return False
+    try:
+        shell = ipython.get_ipython()
+    except Exception:  # noqa: BLE001 - an IPython without get_ipython: not a kernel we know
+        return False
+    return type(shell).__name__ == "ZMQInteractiveShell"
 
 
 def tqdm(*args, **kwargs):

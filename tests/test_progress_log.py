@@ -61,3 +61,13 @@ def test_a_quiet_linear_run_says_what_it_does_before_the_long_part(tmp_path, cap
     lines = out.out.splitlines()
     assert lines[0].startswith("linear: identifying on") and "up to 5 refinement evaluations" in lines[0]
     assert any(line.startswith("free-run NRMSE on test") for line in lines) and out.err == ""
+
+
+def test_ipykernel_imported_outside_a_kernel_still_gets_log_lines(monkeypatch):
+    """A test suite that runs notebooks imports ipykernel; that alone must not switch a log file to terminal bars."""
+    import sys
+    import types
+
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    monkeypatch.setitem(sys.modules, "IPython", types.SimpleNamespace(get_ipython=lambda: None))
+    assert not progress._in_notebook()

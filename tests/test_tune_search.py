@@ -74,4 +74,5 @@ def test_a_quiet_optuna_search_trains_each_point_once_and_prints_only_the_result
     assert hidden == [4, 8]  # four trials asked for, but the grid has two points: each trained once
     assert "Trial status" not in captured.out + captured.err and "│" not in captured.out + captured.err
     assert "A new study created" not in captured.err  # Optuna's INFO line
-    assert captured.out.strip().splitlines()[0].startswith("2 trials of gru"), captured.out
+    lines = [line for line in captured.out.splitlines() if line.strip()]  # the device line, then the result
+    assert lines[0].startswith("device: cpu") and lines[1].startswith("2 trials of gru"), captured.out
