@@ -107,6 +107,19 @@ _BUILT: dict[tuple, Path] = {}
 _LOGGERS: list = []
 
 
+def oscillator_dataset(folder: Path) -> Path:
+    """The linear oscillator's tiny dataset (force in N -> pos in m, vel in m/s; 3 train and 1 test trajectory of 60
+    samples at 0.01 s) saved in ``folder``, for the CLI tests."""
+    from nnfmu.data import Channel, from_arrays, save_dataset
+
+    model, rng = MODELS["linear"], np.random.default_rng(0)
+    us = [rng.normal(size=(60, 1)) for _ in range(4)]
+    ys = [model.simulate(u, [0.1, 0.0]) for u in us]
+    ds = from_arrays(Ts=0.01, u_train=us[:3], y_train=ys[:3], u_test=us[3:], y_test=ys[3:],
+                     input_names=[Channel("force", "N")], output_names=[Channel("pos", "m"), Channel("vel", "m/s")])
+    return save_dataset(ds, folder)
+
+
 def get_model(name: str) -> CasadiModel:
     """``MODELS[name]``, or one of the models built on first use (``valve_gru``)."""
     if name not in MODELS:

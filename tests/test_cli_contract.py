@@ -15,14 +15,12 @@ import time
 from pathlib import Path
 from unittest import mock
 
-import numpy as np
 import pytest
 import torch
-from fmu_cases import MODELS
+from fmu_cases import oscillator_dataset
 
 from nnfmu.atomic import write_atomic
 from nnfmu.cli import main as nnfmu_main
-from nnfmu.data import Channel, from_arrays, save_dataset
 from nnfmu.export.__main__ import main as export_main
 from nnfmu.models import ModelConfig, build_model, save_checkpoint
 
@@ -34,12 +32,7 @@ TRAIN = ["--arch", "gru", "--hidden", "4", "--epochs", "1", "--batch-size", "4",
 def work(tmp_path_factory):
     """A folder with a tiny dataset, a checkpoint, an FMU and a regular file in the way."""
     root = tmp_path_factory.mktemp("contract")
-    model, rng = MODELS["linear"], np.random.default_rng(0)
-    us = [rng.normal(size=(60, 1)) for _ in range(4)]
-    ys = [model.simulate(u, [0.1, 0.0]) for u in us]
-    ds = from_arrays(Ts=0.01, u_train=us[:3], y_train=ys[:3], u_test=us[3:], y_test=ys[3:],
-                     input_names=[Channel("force", "N")], output_names=[Channel("pos", "m"), Channel("vel", "m/s")])
-    data = save_dataset(ds, root / "data")
+    data = oscillator_dataset(root / "data")
     net = build_model(ModelConfig(arch="gru", n_u=1, n_y=2, hidden=4),
                       {"name": "osc_gru", "Ts": 0.01, "inputs": [{"name": "force", "unit": "N"}],
                        "outputs": [{"name": "pos", "unit": "m"}, {"name": "vel", "unit": "m/s"}]})

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from fmu_cases import MODELS
+from fmu_cases import oscillator_dataset
 from test_cli_contract import file_size_limit
 
 from nnfmu.cli import build_parser, command_parser, run
 from nnfmu.cli import main as nnfmu_main
-from nnfmu.data import Channel, from_arrays, save_dataset
+from nnfmu.data import from_arrays, save_dataset
 from nnfmu.errors import ConfigError
 from nnfmu.models import ModelConfig, build_model, save_checkpoint
 
@@ -33,12 +33,7 @@ META = {"name": "osc_gru", "Ts": 0.01, "inputs": [{"name": "force", "unit": "N"}
 def work(tmp_path_factory):
     """A tiny oscillator dataset (3 train, 1 test trajectory of 60 samples), its linear FMU, constant data."""
     root = tmp_path_factory.mktemp("messages")
-    model, rng = MODELS["linear"], np.random.default_rng(0)
-    us = [rng.normal(size=(60, 1)) for _ in range(4)]
-    ys = [model.simulate(u, [0.1, 0.0]) for u in us]
-    ds = from_arrays(Ts=0.01, u_train=us[:3], y_train=ys[:3], u_test=us[3:], y_test=ys[3:],
-                     input_names=[Channel("force", "N")], output_names=[Channel("pos", "m"), Channel("vel", "m/s")])
-    data = save_dataset(ds, root / "data")
+    data = oscillator_dataset(root / "data")
     ones = [np.ones((60, 1))] * 4
     constant = save_dataset(from_arrays(Ts=0.01, u_train=ones[:3], y_train=ones[:3], u_test=ones[3:],
                                         y_test=ones[3:]), root / "constant")
