@@ -13,7 +13,7 @@ import time
 
 def prepare(args, ds, model_config, train_config, given: dict):
     """``(dataset with its validation split, model_config, train_config, linear model or None)`` for a new run."""
-    from nnfmu.training.plan import plan_training, valid_fraction
+    from nnfmu.training.plan import plan_training, valid_fraction, validation_line
     from nnfmu.training.trainer import prepare_dataset
 
     if model_config.arch == "hybrid":
@@ -21,6 +21,7 @@ def prepare(args, ds, model_config, train_config, given: dict):
     init_window = model_config.init_window
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
         train_config = train_config.replace(valid_fraction=frac)
+        print(f"plan: {validation_line(ds, frac)}")
     carved, notes = prepare_dataset(ds, train_config)
     for note in notes:
         print(f"note: {note}")

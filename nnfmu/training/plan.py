@@ -73,13 +73,18 @@ def valid_fraction(ds: Dataset, init_window: int = 1) -> float | None:
     return float(min(max(tail / n, 0.05), 0.5))
 
 
+def validation_line(ds: Dataset, frac: float) -> str:
+    """What the plan says of the validation tail it carves from the one training record."""
+    return (f"validation: the last {frac:.0%} of the record ({int(frac * ds.train.lengths[0])} samples, long enough "
+            "to rank models over a test-like horizon)")
+
+
 def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1) -> Plan:
     """The data-driven choices for the TrainConfig fields not in ``given`` (field -> value the user gave)."""
     changes, lines = {}, []
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
         changes["valid_fraction"] = frac
-        lines.append(f"validation: the last {frac:.0%} of the record ({int(frac * ds.train.lengths[0])} samples, "
-                     "long enough to rank models over a test-like horizon)")
+        lines.append(validation_line(ds, frac))
     lengths = np.asarray(ds.train.lengths, dtype=float) * (1.0 - changes.get("valid_fraction", 0.0))
     if given.get("join"):
         lengths = np.array([lengths.sum()])
