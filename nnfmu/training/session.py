@@ -178,7 +178,9 @@ class Session:
                  "best_valid_nrmse": self.best_score, "best_epoch": self.best_epoch, "improved": improved,
                  "seconds": seconds, "partial": partial}
         self.history.append(entry)
-        self.snapshot = copy.deepcopy(self.resume_state())  # what a write after a signal or an error holds
+        self.snapshot = self.resume_state()  # what a write after a signal or an error holds
+        for part in ("optimizer", "average"):  # the weights are copies already; these still reference live tensors
+            self.snapshot[part] = copy.deepcopy(self.snapshot[part])
         self.unsaved_improvement |= improved
         return entry
 
