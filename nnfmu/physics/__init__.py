@@ -7,18 +7,29 @@
 - :func:`slider_system` / :class:`SliderParams`: a mass on a rail with friction (an integrating plant).
 - :func:`rk4_step`, :func:`rk4_function`: the fixed-step RK4 used everywhere.
 - :func:`generate_dataset`: simulated datasets (``nnfmu generate``).
+- :func:`resolve_physics` / :func:`register_physics`: the models by name (:mod:`nnfmu.physics.registry`);
+  :func:`system_to_document`: a model as JSON with its CasADi Functions serialized.
 """
 
 from nnfmu.physics.arm import ARM_F_B_CAP, ARM_N_SUB, ArmParams, arm_system
 from nnfmu.physics.arm_dynamics import bias_torque, forward_dynamics, kinetic_energy, mass_matrix, rnea
 from nnfmu.physics.base import PhysicsSystem, parameter_variables, params_to_json, unpack_parameters
 from nnfmu.physics.compiled import compile_function
+from nnfmu.physics.document import system_from_document, system_to_document
 from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
 from nnfmu.physics.rk4 import rk4_function, rk4_step
 from nnfmu.physics.slider import SliderParams, slider_system
 from nnfmu.physics.valve import ValveParams, valve_system
+from nnfmu.physics.registry import PhysicsEntry, physics_entry, physics_names, register_physics, resolve_physics
 
 __all__ = [
+    "PhysicsEntry",
+    "physics_entry",
+    "physics_names",
+    "register_physics",
+    "resolve_physics",
+    "system_from_document",
+    "system_to_document",
     "ARM_F_B_CAP",
     "ARM_N_SUB",
     "ArmParams",

@@ -52,6 +52,7 @@ import casadi as ca
 
 from nnfmu.data.loaders import ROBOT_INPUTS, ROBOT_OUTPUTS
 from nnfmu.physics.arm_dynamics import Link, forward_dynamics
+from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
 from nnfmu.system import Variable
 
@@ -199,3 +200,7 @@ def arm_system(params: ArmParams | None = None, *, f_b_cap: float | None = ARM_F
         description="KUKA KR300 R2500 rigid arm with friction and counterbalance (physics.md section 3), RK4",
         source={"model": "nnfmu.physics.arm", "params": params_to_json(params), "f_b_cap": f_b_cap},
     )
+
+
+register_physics(PhysicsEntry("arm", arm_system, corrected_states=tuple(f"qd{j}" for j in range(1, 7)),
+                              correction_time=1.0))

@@ -117,6 +117,9 @@ class PhysicsSystem:
         One line for humans.
     source : dict
         Provenance and the parameter set, JSON-serialisable.
+    free_parameters : tuple of str, optional
+        Names of the parameters a grey-box fit estimates by default (None: all of them). Bounds
+        are each parameter's ``min`` / ``max``; its ``start`` is the nominal value.
     """
 
     name: str
@@ -132,6 +135,7 @@ class PhysicsSystem:
     state_scales: tuple[float, ...] = ()
     description: str = ""
     source: dict = field(default_factory=dict)
+    free_parameters: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         _check_ports(self.ode, ["x", "u", "p"], ["xdot"], f"{self.name} ode")
@@ -146,6 +150,11 @@ class PhysicsSystem:
                 raise ShapeError(f"{self.name}: {what} has {got} entries but {want} variables are named")
         if self.state_scales and len(self.state_scales) != len(self.states):
             raise ShapeError(f"{self.name}: {len(self.state_scales)} state scales for {len(self.states)} states")
+        names = [v.name for v in self.parameters]
+        unknown = sorted(set(self.free_parameters or ()) - set(names))
+        if unknown:
+            raise ShapeError(f"{self.name}: free parameter(s) {', '.join(unknown)} are not among its parameters "
+                             f"({', '.join(names)})")
 
     @property
     def n_x(self) -> int:

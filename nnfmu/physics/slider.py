@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
+from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
 from nnfmu.system import Variable
 
@@ -73,3 +74,6 @@ def slider_system(params: SliderParams | None = None) -> PhysicsSystem:
         description="mass on a rail with Stribeck friction driven by a force (an integrating plant), RK4",
         source={"model": "nnfmu.physics.slider", "params": params_to_json(params)},
     )
+
+
+register_physics(PhysicsEntry("slider", slider_system, corrected_states=("v",), correction_time=0.1))

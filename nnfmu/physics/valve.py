@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
+from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
 from nnfmu.system import Variable
 
@@ -169,3 +170,6 @@ def valve_system(params: ValveParams | None = None) -> PhysicsSystem:
         description="two-stage pneumatic valve (generic model, physics.md section 1), RK4",
         source={"model": "nnfmu.physics.valve", "params": params_to_json(params)},
     )
+
+
+register_physics(PhysicsEntry("valve", valve_system, corrected_states=("p", "sdot"), correction_time=1e-3))
