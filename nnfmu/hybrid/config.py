@@ -1,10 +1,17 @@
-"""``HybridConfig``: a physics model (valve or arm), its parameter values and its neural correction.
+"""``HybridConfig``: a physics model (any registered one, or the user's own), its parameter values and its neural correction.
 
 A :class:`HybridConfig` is a :class:`~nnfmu.models.ModelConfig` with ``arch="hybrid"``, so the
 one trainer, checkpoints and ``load_model`` treat a hybrid like any other network. Of the
 inherited fields, ``hidden``, ``layers`` (default 2), ``activation`` and ``dropout`` shape the
 correction MLP; ``window`` is 1 (the physics state is the memory); ``kernel_size``, ``skip`` and
 ``skip_scale`` do not apply (the physics plays the part of the skip connection).
+
+The physics is a spec that :func:`nnfmu.physics.resolve_physics` understands: a registered name
+(``"valve"``, ``"arm"``, ``"slider"``; stored as the name, as before), a model file
+``"path/to/file.py:NAME"``, a physics document or grey-box fit result ``"path/to/file.json"``, or a
+:class:`~nnfmu.physics.PhysicsSystem` itself. Anything but a registered name is stored in the
+config (and so in every checkpoint) as its physics document (:func:`nnfmu.physics.document.system_to_document`:
+CasADi's serialization, never Python), so loading, exporting and scoring never need the file again.
 
 Physical parameters are named as the entries of the physics' ``p`` vector
 (``valve_system().parameters``: ``k_s``, ``C_max``, ...; the arm's tuple fields
@@ -22,44 +29,57 @@ import json
 import math
 import os
 from dataclasses import dataclass
-from typing import Callable, Mapping
+from typing import Mapping
 
-from nnfmu.errors import ConfigError, DataFileError, ShapeError, UnknownOptionError
+from nnfmu.errors import CheckpointError, ConfigError, DataFileError, ShapeError, UnknownOptionError
 from nnfmu.hybrid.compiled_torch import BACKENDS
 from nnfmu.models.config import ACTIVATIONS, ModelConfig
-from nnfmu.physics import PhysicsSystem, arm_system, valve_system
+from nnfmu.physics import PhysicsSystem
+from nnfmu.physics.document import system_from_document, system_to_document
+from nnfmu.physics.registry import physics_entry, physics_names, resolve_physics
 
 CORRECTIONS = ("derivative", "step")
 HYBRID_ARCH = "hybrid"
 
 
-@dataclass(frozen=True)
-class PhysicsEntry:
-    """What the hybrid needs to know about one physics model beyond its :class:`PhysicsSystem`.
-
-    ``corrected_states``: the states whose derivative the network corrects by default: the
-    ones driven by uncertain forces and flows, not the kinematic identities (d/dt s = sdot).
-    ``correction_time`` (s): one unit of network output changes a corrected derivative by
-    ``state_scale / correction_time``, i.e. about a typical state change per this time.
-    """
-
-    build: Callable[[], PhysicsSystem]
-    corrected_states: tuple[str, ...]
-    correction_time: float
-
-
-PHYSICS = {
-    "valve": PhysicsEntry(valve_system, ("p", "sdot"), 1e-3),
-    "arm": PhysicsEntry(arm_system, tuple(f"qd{j}" for j in range(1, 7)), 1.0),
-}
+PHYSICS = {name: physics_entry(name) for name in ("valve", "arm")}
+"""The two physics models hybrids took before the registry (kept for callers that read it; the registry,
+:func:`nnfmu.physics.physics_names`, holds every model)."""
 
 
 @functools.lru_cache(maxsize=None)
 def physics_system(name: str) -> PhysicsSystem:
-    """The nominal :class:`PhysicsSystem` called ``name`` (built once per process)."""
-    if name not in PHYSICS:
-        raise ConfigError(f"unknown physics {name!r}; choose one of {', '.join(PHYSICS)}")
-    return PHYSICS[name].build()
+    """The nominal registered :class:`PhysicsSystem` called ``name`` (built once per process)."""
+    return physics_entry(name).build()
+
+
+@functools.lru_cache(maxsize=8)
+def document_system(text: str) -> PhysicsSystem:
+    """The :class:`PhysicsSystem` of a physics document given as JSON text (built once per document)."""
+    return system_from_document(json.loads(text))
+
+
+def _document_text(doc) -> str:
+    """Canonical JSON text of a physics document (a dict, or JSON text): hashable, comparable, stored."""
+    if isinstance(doc, str):
+        try:
+            doc = json.loads(doc)
+        except json.JSONDecodeError as exc:
+            raise CheckpointError(f"the hybrid's stored physics document is not valid JSON ({exc}); "
+                                  "train or export the hybrid again") from exc
+    if not isinstance(doc, Mapping):
+        raise CheckpointError(f"the hybrid's physics document must be a JSON object, got {type(doc).__name__}")
+    return json.dumps(dict(doc), sort_keys=True, separators=(",", ":"))
+
+
+def _registered_defaults(system: PhysicsSystem, name: str | None):
+    """The registry's entry whose defaults apply to ``system`` (its own name's, if the states match), or None."""
+    name = system.name if name is None else name
+    if name not in physics_names():
+        return None
+    entry = physics_entry(name)
+    states = {v.name for v in system.states}
+    return entry if set(entry.corrected_states or ()) <= states else None
 
 
 def _number(name: str, value) -> float:
@@ -68,15 +88,20 @@ def _number(name: str, value) -> float:
     return float(value)
 
 
-def normalise_physics_params(physics: str, params: Mapping) -> tuple[tuple[str, float], ...]:
+def normalise_physics_params(physics: str | PhysicsSystem, params: Mapping,
+                             label: str | None = None) -> tuple[tuple[str, float], ...]:
     """Check parameter overrides against ``physics``' ``p`` names; sorted ``(name, value)`` pairs.
+
+    ``physics``: a registered name or the system itself (``label`` names it in messages).
 
     A list value expands a tuple field: ``{"f_vis": [a, ..]}`` -> ``f_vis1 = a, ...``.
     Raises UnknownOptionError (listing the valid names) or ConfigError (bad value).
     """
     if not isinstance(params, Mapping):
         raise ConfigError(f"physics parameters must be a mapping of name -> number, got {type(params).__name__}")
-    valid = [v.name for v in physics_system(physics).parameters]
+    system = physics if isinstance(physics, PhysicsSystem) else physics_system(physics)
+    physics = label or (system.name if isinstance(physics, PhysicsSystem) else physics)
+    valid = [v.name for v in system.parameters]
     out: dict[str, float] = {}
     for name, value in params.items():
         if isinstance(value, (list, tuple)):
@@ -119,14 +144,24 @@ class HybridConfig(ModelConfig):
 
     Attributes
     ----------
-    physics : {'valve', 'arm'}
-        The CasADi physics model (:func:`nnfmu.physics.valve_system`, :func:`~nnfmu.physics.arm_system`).
+    physics : str or PhysicsSystem or dict
+        The CasADi physics model: a spec :func:`nnfmu.physics.resolve_physics` takes (a registered
+        name, ``FILE.py:NAME``, ``FILE.json``), the system itself or its document. After
+        construction it is a string: the registered name, or a label (the spec as given, or the
+        system's name) when :attr:`physics_document` holds the model.
+    physics_document : dict or None
+        The physics as a :func:`~nnfmu.physics.document.system_to_document` document, filled in
+        for anything but a registered name (None for those: their checkpoints stay as they were).
+        When present it is the physics, whatever :attr:`physics` says.
     physics_params : mapping of str to float
         Values replacing the nominal ones (possibly wrong on purpose); a list expands a tuple field.
-    train_physics : tuple of str
+    train_physics : tuple of str or None
         Parameters trained with the network, in log-space: ``p = p_given * exp(gain * theta)``,
         ``theta`` starting at 0 (so they keep their sign and cannot cross zero; a parameter
-        whose value is 0 cannot be trained this way).
+        whose value is 0 cannot be trained this way), clipped to the parameter's ``min`` / ``max``
+        where it has them. None (default): none for a registered model; for any other, its
+        ``free_parameters`` (all when it names none) except those whose value is 0, so that a
+        hybrid on a grey-box fit result continues the fit jointly with the network.
     train_physics_gain : float
         ``gain`` above. Adam moves ``theta`` by about ``lr`` per step, so a physical parameter
         changes by about ``gain * lr`` (relative) per step: 10 lets a 30 % error be corrected
@@ -135,9 +170,11 @@ class HybridConfig(ModelConfig):
         ``'derivative'``: ``xdot = ode(x, u, p) + delta(x, u)`` inside every RK4 stage.
         ``'step'``: ``x+ = RK4_physics(x, u, p) + Ts * delta(x, u)``, one network call per sample.
     corrected_states : tuple of str or None
-        States whose derivative ``delta`` corrects (None: the physics' default, see :data:`PHYSICS`).
+        States whose derivative ``delta`` corrects (None: the registered model's default, see
+        :class:`nnfmu.physics.PhysicsEntry`; every state for a model the registry does not know).
     correction_time : float or None
-        Seconds; ``delta_i = state_scale_i / correction_time * N_i`` (None: the physics' default).
+        Seconds; ``delta_i = state_scale_i / correction_time * N_i`` (None: the registered model's
+        default; the physics' sample time ``Ts`` for a model the registry does not know).
     n_sub : int or None
         RK4 sub-steps per sample (None: the physics' own choice).
     physics_backend : {'compiled', 'sx'}
@@ -148,8 +185,9 @@ class HybridConfig(ModelConfig):
 
     arch: str = "hybrid"
     physics: str = "valve"
+    physics_document: Mapping | str | None = None
     physics_params: Mapping = ()
-    train_physics: tuple = ()
+    train_physics: tuple | None = None
     train_physics_gain: float = 10.0
     correction: str = "derivative"
     corrected_states: tuple | None = None
@@ -160,28 +198,31 @@ class HybridConfig(ModelConfig):
     def __post_init__(self) -> None:
         if self.arch != "hybrid":
             raise ConfigError(f"HybridConfig has arch 'hybrid', got {self.arch!r}; use ModelConfig for networks")
-        if self.physics not in PHYSICS:
-            raise ConfigError(f"unknown physics {self.physics!r}; choose one of {', '.join(PHYSICS)}")
+        system = self._resolve_physics()
         for name, valid in (("correction", CORRECTIONS), ("physics_backend", BACKENDS)):
             if getattr(self, name) not in valid:
                 raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(valid)}")
         self._check_network()
-        system = physics_system(self.physics)
         for name, n in (("n_u", len(system.inputs)), ("n_y", len(system.outputs))):
             if getattr(self, name) != n:
                 raise ShapeError(f"the {self.physics} physics has {name} = {n}, got {getattr(self, name)!r}; "
                                  "train it on data of that system")
         pairs = dict(self.physics_params) if not isinstance(self.physics_params, Mapping) else self.physics_params
-        object.__setattr__(self, "physics_params", normalise_physics_params(self.physics, pairs))
+        object.__setattr__(self, "physics_params", normalise_physics_params(system, pairs, self.physics))
+        if self.train_physics is None:
+            object.__setattr__(self, "train_physics", self._default_train_physics(system))
         self._check_names("train_physics", [v.name for v in system.parameters], "parameter")
         self._check_trainable_nonzero()
+        entry = _registered_defaults(system, None if self.physics_document else self.physics)
         if self.corrected_states is None:
-            object.__setattr__(self, "corrected_states", PHYSICS[self.physics].corrected_states)
+            default = entry.corrected_states if entry is not None else None
+            object.__setattr__(self, "corrected_states", default or tuple(v.name for v in system.states))
         self._check_names("corrected_states", [v.name for v in system.states], "state")
         if not self.corrected_states:
             raise ConfigError("corrected_states is empty: the network would correct nothing; name at least one state")
         if self.correction_time is None:
-            object.__setattr__(self, "correction_time", PHYSICS[self.physics].correction_time)
+            default = entry.correction_time if entry is not None else None
+            object.__setattr__(self, "correction_time", default or system.Ts)
         if not (isinstance(self.correction_time, (int, float)) and self.correction_time > 0):
             raise ConfigError(f"correction_time must be a positive number of seconds, got {self.correction_time!r}")
         object.__setattr__(self, "correction_time", float(self.correction_time))
@@ -191,6 +232,45 @@ class HybridConfig(ModelConfig):
         if self.n_sub is not None and (isinstance(self.n_sub, bool) or not isinstance(self.n_sub, int)
                                        or self.n_sub < 1):
             raise ConfigError(f"n_sub must be None or a positive integer number of RK4 sub-steps, got {self.n_sub!r}")
+
+    def _resolve_physics(self) -> PhysicsSystem:
+        """Turn :attr:`physics` into a registered name or a label plus :attr:`physics_document`; the system."""
+        spec = self.physics
+        if isinstance(spec, PhysicsSystem):
+            object.__setattr__(self, "physics_document", system_to_document(spec))
+            object.__setattr__(self, "physics", spec.name)
+        elif isinstance(spec, Mapping):  # a physics document
+            object.__setattr__(self, "physics_document", spec)
+            object.__setattr__(self, "physics", str(spec.get("name", "physics")))
+        elif not isinstance(spec, str) or not spec:
+            raise ConfigError(f"physics must be a registered name ({', '.join(physics_names())}), FILE.py:NAME, "
+                              f"FILE.json or a PhysicsSystem, got {spec!r}")
+        elif self.physics_document is None and spec not in physics_names():
+            object.__setattr__(self, "physics_document", system_to_document(resolve_physics(spec)))
+        if self.physics_document is None:
+            return physics_system(self.physics)
+        object.__setattr__(self, "physics_document", _document_text(self.physics_document))
+        return document_system(self.physics_document)
+
+    def system(self) -> PhysicsSystem:
+        """The physics at its nominal parameters (before :attr:`physics_params`), built once per process."""
+        if self.physics_document is not None:
+            return document_system(self.physics_document)
+        return physics_system(self.physics)
+
+    def physics_key(self) -> tuple[str, str]:
+        """What identifies the physics for caches: ``("name", name)`` or ``("document", json_text)``."""
+        if self.physics_document is not None:
+            return ("document", self.physics_document)
+        return ("name", self.physics)
+
+    def _default_train_physics(self, system: PhysicsSystem) -> tuple[str, ...]:
+        if self.physics_document is None:
+            return ()  # a registered model: the physics stays as given unless told (as before the registry)
+        given = dict(self.physics_params)
+        free = system.free_parameters if system.free_parameters is not None else [v.name for v in system.parameters]
+        return tuple(v.name for v in system.parameters
+                     if v.name in free and given.get(v.name, v.start) != 0.0)
 
     def _check_network(self) -> None:
         for name in ("n_u", "n_y", "hidden"):
@@ -231,7 +311,7 @@ class HybridConfig(ModelConfig):
 
     def _check_trainable_nonzero(self) -> None:
         values = self.parameter_values()
-        names = [v.name for v in physics_system(self.physics).parameters]
+        names = [v.name for v in self.system().parameters]
         zero = [n for n in self.train_physics if values[names.index(n)] == 0.0]
         if zero:
             raise ConfigError(f"cannot train {zero}: their value is 0, and physical parameters are trained in "
@@ -240,13 +320,20 @@ class HybridConfig(ModelConfig):
 
     def parameter_values(self) -> list[float]:
         """The ``p`` vector before training: the nominal values with :attr:`physics_params` applied."""
-        system = physics_system(self.physics)
         given = dict(self.physics_params)
-        return [given.get(v.name, v.start) for v in system.parameters]
+        return [given.get(v.name, v.start) for v in self.system().parameters]
 
     def to_dict(self) -> dict:
-        """Plain dict (JSON- and ``weights_only``-safe); ``physics_params`` as a dict."""
+        """Plain dict (JSON- and ``weights_only``-safe); ``physics_params`` and the physics document as dicts.
+
+        A registered model's config has no ``physics_document`` key (as before the registry), so
+        checkpoints of built-in hybrids are the same as they were.
+        """
         d = dataclasses.asdict(self)
+        if self.physics_document is None:
+            del d["physics_document"]
+        else:
+            d["physics_document"] = json.loads(self.physics_document)
         d["physics_params"] = dict(self.physics_params)
         d["train_physics"] = list(self.train_physics)
         d["corrected_states"] = list(self.corrected_states)

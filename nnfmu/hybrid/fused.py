@@ -57,7 +57,7 @@ def fused_step(model) -> CompiledFunction | None:
         return None
     if 4 * model.n_sub * model.physics.ode.n_instructions() > MAX_ODE_INSTRUCTIONS:
         return None  # the unrolled step would take minutes to compile (the arm: 4208 x 200)
-    key = (config.physics, config.correction, model.Ts, model.n_sub, config.n_u, _layout(modules),
+    key = (config.physics_key(), config.correction, model.Ts, model.n_sub, config.n_u, _layout(modules),
            tuple(model._state_scale.tolist()), tuple(model._scatter.reshape(-1).tolist()))
     if key not in _COMPILED:  # one compiled step per layout: the model supplies the structure, not the weights
         _COMPILED[key] = _compile(model)

@@ -44,7 +44,7 @@ from torch.nn import functional as F
 
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.hybrid.compiled_torch import casadi_to_torch
-from nnfmu.hybrid.config import HybridConfig, physics_system
+from nnfmu.hybrid.config import HybridConfig, document_system, physics_system
 from nnfmu.hybrid.fused import fused_step, weight_vector
 from nnfmu.models.base import StepModel
 from nnfmu.models.mlp import activation_module
@@ -84,8 +84,11 @@ class PhysicsBridge:
 
 
 @functools.lru_cache(maxsize=None)
-def physics_bridge(physics: str, backend: str, Ts: float, n_sub: int, with_rk4: bool) -> PhysicsBridge:
-    return PhysicsBridge(physics_system(physics), backend, Ts, n_sub, with_rk4)
+def physics_bridge(physics: tuple[str, str], backend: str, Ts: float, n_sub: int, with_rk4: bool) -> PhysicsBridge:
+    """The bridge of the physics that ``physics`` (:meth:`HybridConfig.physics_key`) identifies."""
+    kind, value = physics
+    system = document_system(value) if kind == "document" else physics_system(value)
+    return PhysicsBridge(system, backend, Ts, n_sub, with_rk4)
 
 
 def physics_meta(system: PhysicsSystem) -> dict:
@@ -119,18 +122,19 @@ class HybridStepModel(StepModel):
     def __init__(self, config: HybridConfig, meta: Mapping | None = None):
         if not isinstance(config, HybridConfig):
             raise ShapeError(f"expected a HybridConfig, got {type(config).__name__}")
-        system = physics_system(config.physics)
+        system = config.system()
         super().__init__(config, physics_meta(system) if meta is None else meta)
         _check_units(self.meta, system)
         self.Ts = float(self.meta["Ts"])
         self.n_sub = config.n_sub or max(1, math.ceil(system.n_sub * self.Ts / system.Ts - 1e-9))
-        self._bridge = physics_bridge(config.physics, config.physics_backend, self.Ts, self.n_sub,
+        self._bridge = physics_bridge(config.physics_key(), config.physics_backend, self.Ts, self.n_sub,
                                       config.correction == "step")
         names = [v.name for v in system.parameters]
         states = [v.name for v in system.states]
         # float64 constants outside the state_dict (rebuilt from the config): .to(float32) must not round them
         self._p_given = torch.tensor(config.parameter_values(), dtype=torch.float64)
         self._trained = torch.tensor([names.index(n) for n in config.train_physics], dtype=torch.long)
+        self._p_min, self._p_max = _trained_bounds(system, config.train_physics)
         self._state_scale = torch.tensor(system.state_scales or (1.0,) * system.n_x, dtype=torch.float64)
         self._corrected = torch.tensor([states.index(n) for n in config.corrected_states], dtype=torch.long)
         scale = self._state_scale[self._corrected] / config.correction_time
@@ -144,8 +148,9 @@ class HybridStepModel(StepModel):
         """``.to(device)`` moves the float64 constants too (their dtype stays float64, see ``__init__``)."""
         super()._apply(fn, recurse)
         device = self.u_mean.device
-        for name in ("_p_given", "_trained", "_state_scale", "_corrected", "_scatter"):
-            setattr(self, name, getattr(self, name).to(device))
+        for name in ("_p_given", "_trained", "_p_min", "_p_max", "_state_scale", "_corrected", "_scatter"):
+            value = getattr(self, name)
+            setattr(self, name, None if value is None else value.to(device))
         return self
 
     # ---- physics ----------------------------------------------------------------------------
@@ -158,12 +163,16 @@ class HybridStepModel(StepModel):
         return self.physics.n_x
 
     def physics_parameters(self) -> torch.Tensor:
-        """The parameter vector ``p`` (n_p,) in float64: given values, trained entries times ``exp(gain * theta)``."""
+        """The parameter vector ``p`` (n_p,) in float64: given values, trained entries times ``exp(gain * theta)``.
+
+        A trained entry stays within its parameter's ``min`` / ``max`` (clipped there) where it has them.
+        """
         if not len(self._trained):
             return self._p_given
         theta = self.physics_log_scale.double() * self.config.train_physics_gain
         factor = torch.ones_like(self._p_given).index_put((self._trained,), torch.exp(theta))
-        return self._p_given * factor
+        p = self._p_given * factor
+        return p if self._p_min is None else torch.clamp(p, self._p_min, self._p_max)
 
     def physics_parameter_values(self) -> dict[str, float]:
         """Current physical parameters by name (the trained values where trained)."""
@@ -247,6 +256,15 @@ class HybridStepModel(StepModel):
 
     def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
+
+
+def _trained_bounds(system: PhysicsSystem, trained) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """Float64 ``(min, max)`` vectors (n_p,) of the trained parameters' bounds (+-inf elsewhere); None if there are none."""
+    lower = [v.min if v.name in trained and v.min is not None else -math.inf for v in system.parameters]
+    upper = [v.max if v.name in trained and v.max is not None else math.inf for v in system.parameters]
+    if all(math.isinf(b) for b in lower + upper):
+        return None, None
+    return torch.tensor(lower, dtype=torch.float64), torch.tensor(upper, dtype=torch.float64)
 
 
 def _as(t: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
