@@ -2,6 +2,8 @@
 
 - :class:`PhysicsSystem`: a continuous-time model with named variables; ``.model()`` gives the
   RK4-discretised ``(init, step)`` pair (:class:`nnfmu.system.CasadiModel`).
+- :class:`ModelBuilder`: write a model in a few lines of CasADi (docs/own-physics.md); the built-in
+  models below are written with it.
 - :func:`valve_system` / :class:`ValveParams`: the two-stage pneumatic valve.
 - :func:`arm_system` / :class:`ArmParams`: the KUKA KR300 arm (RNEA in :mod:`nnfmu.physics.arm_dynamics`).
 - :func:`slider_system` / :class:`SliderParams`: a mass on a rail with friction (an integrating plant).
@@ -14,6 +16,7 @@
 from nnfmu.physics.arm import ARM_F_B_CAP, ARM_N_SUB, ArmParams, arm_system
 from nnfmu.physics.arm_dynamics import bias_torque, forward_dynamics, kinetic_energy, mass_matrix, rnea
 from nnfmu.physics.base import PhysicsSystem, parameter_variables, params_to_json, unpack_parameters
+from nnfmu.physics.builder import ModelBuilder, check_system
 from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.document import system_from_document, system_to_document
 from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
@@ -23,6 +26,8 @@ from nnfmu.physics.valve import ValveParams, valve_system
 from nnfmu.physics.registry import PhysicsEntry, physics_entry, physics_names, register_physics, resolve_physics
 
 __all__ = [
+    "ModelBuilder",
+    "check_system",
     "PhysicsEntry",
     "physics_entry",
     "physics_names",

@@ -53,8 +53,8 @@ import casadi as ca
 from nnfmu.data.loaders import ROBOT_INPUTS, ROBOT_OUTPUTS
 from nnfmu.physics.arm_dynamics import Link, forward_dynamics
 from nnfmu.physics.registry import PhysicsEntry, register_physics
-from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
-from nnfmu.system import Variable
+from nnfmu.physics.base import PhysicsSystem, param, params_to_json
+from nnfmu.physics.builder import ModelBuilder
 
 __all__ = ["ArmParams", "arm_system", "arm_links", "arm_friction", "counterbalance_torque",
            "ARM_TS", "ARM_F_B_CAP", "ARM_N_SUB", "ARM_Q_LIMITS_DEG", "ARM_TAU_LIMITS_NM", "Q_DH_OFFSET",
@@ -178,28 +178,21 @@ def arm_system(params: ArmParams | None = None, *, f_b_cap: float | None = ARM_F
         use it only with an implicit integrator.
     """
     params = ArmParams() if params is None else params
-    variables = parameter_variables(params)
-    if f_b_cap is not None:
-        variables += (Variable("f_b_cap", "s/rad", "cap on the stiction slope f_b used by the ODE", float(f_b_cap)),)
-    x, u, p = ca.SX.sym("x", 12), ca.SX.sym("u", 6), ca.SX.sym("p", len(variables))
-    P = unpack_parameters(params, p[:len(variables) - (f_b_cap is not None)])
-    cap = p[-1] if f_b_cap is not None else None
-    ode = ca.Function("arm_ode", [x, u, p], [_arm_rhs(x, u, P, cap)], ["x", "u", "p"], ["xdot"])
-    output = ca.Function("arm_output", [x, p], [x[:6] * (180.0 / math.pi)], ["x", "p"], ["y"])
-    y0 = ca.SX.sym("y0", 6)
-    init_state = ca.Function("arm_init_state", [y0, u, p], [ca.vertcat(y0 * (math.pi / 180.0), ca.SX.zeros(6))],
-                             ["y0", "u0", "p"], ["x0"])
-    states = tuple(Variable(f"q{j + 1}", "rad", f"angle of joint {j + 1}") for j in _J6) + \
-        tuple(Variable(f"qd{j + 1}", "rad/s", f"velocity of joint {j + 1}") for j in _J6)
-    return PhysicsSystem(
-        name="arm", Ts=ARM_TS, n_sub=ARM_N_SUB, ode=ode, output=output, init_state=init_state, states=states,
-        inputs=tuple(Variable(c.name, c.unit, c.description, min=lo, max=hi)
-                     for c, (lo, hi) in zip(ROBOT_INPUTS, ARM_TAU_LIMITS_NM, strict=True)),
-        outputs=tuple(Variable(c.name, c.unit, c.description) for c in ROBOT_OUTPUTS),
-        parameters=variables, state_scales=(1.0,) * 6 + (0.5,) * 6,
-        description="KUKA KR300 R2500 rigid arm with friction and counterbalance (physics.md section 3), RK4",
-        source={"model": "nnfmu.physics.arm", "params": params_to_json(params), "f_b_cap": f_b_cap},
-    )
+    m = ModelBuilder("arm", Ts=ARM_TS, n_sub=ARM_N_SUB,
+                     description="KUKA KR300 R2500 rigid arm with friction and counterbalance (physics.md section 3), "
+                                 "RK4",
+                     source={"model": "nnfmu.physics.arm", "params": params_to_json(params), "f_b_cap": f_b_cap})
+    q = [m.state(f"q{j + 1}", "rad", f"angle of joint {j + 1}") for j in _J6]
+    qd = [m.state(f"qd{j + 1}", "rad/s", f"velocity of joint {j + 1}", scale=0.5) for j in _J6]
+    u = ca.vertcat(*[m.input(c.name, c.unit, c.description, min=lo, max=hi)
+                     for c, (lo, hi) in zip(ROBOT_INPUTS, ARM_TAU_LIMITS_NM, strict=True)])
+    P = m.parameters_from(params)
+    cap = None if f_b_cap is None else m.parameter("f_b_cap", float(f_b_cap), "s/rad",
+                                                   "cap on the stiction slope f_b used by the ODE")
+    m.ode(_arm_rhs(ca.vertcat(*q, *qd), u, P, cap))
+    measured = [m.output(c.name, c.unit, c.description, q[j] * (180.0 / math.pi)) for j, c in enumerate(ROBOT_OUTPUTS)]
+    m.init(**{f"q{j + 1}": measured[j] * (math.pi / 180.0) for j in _J6})  # the velocities start at 0
+    return m.build()
 
 
 register_physics(PhysicsEntry("arm", arm_system, corrected_states=tuple(f"qd{j}" for j in range(1, 7)),

@@ -21,18 +21,13 @@ from dataclasses import dataclass
 import casadi as ca
 
 from nnfmu.physics.registry import PhysicsEntry, register_physics
-from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
-from nnfmu.system import Variable
+from nnfmu.physics.base import PhysicsSystem, param, params_to_json
+from nnfmu.physics.builder import ModelBuilder
 
 __all__ = ["SliderParams", "slider_system", "SLIDER_TS", "SLIDER_F_MAX"]
 
 SLIDER_TS = 0.01
 SLIDER_F_MAX = 6.0
-
-_STATES = (Variable("pos", "m", "position of the mass on the rail"), Variable("v", "m/s", "velocity of the mass"))
-_INPUTS = (Variable("F", "N", "driving force"),)
-_OUTPUTS = (Variable("pos", "m", "measured position of the mass"),)
-
 
 @dataclass(frozen=True, kw_only=True)
 class SliderParams:
@@ -53,27 +48,22 @@ def _friction(v, P):
 
 
 def slider_system(params: SliderParams | None = None) -> PhysicsSystem:
-    """The slider as a :class:`PhysicsSystem` (Ts = 10 ms, 4 RK4 sub-steps).
+    """The slider as a :class:`PhysicsSystem` (Ts = 10 ms, 4 RK4 sub-steps), written with :class:`ModelBuilder`.
 
     The smoothed sign makes the ODE stiff near zero speed (rate ``F_s / (m v_eps)`` = 500 1/s
     with the defaults); 4 sub-steps of 2.5 ms keep RK4 inside its stability region.
     """
     params = SliderParams() if params is None else params
-    variables = parameter_variables(params)
-    x, u = ca.SX.sym("x", 2), ca.SX.sym("u", 1)
-    p = ca.SX.sym("p", len(variables))
-    P = unpack_parameters(params, p)
-    xdot = ca.vertcat(x[1], (u[0] - _friction(x[1], P)) / P.m)
-    ode = ca.Function("slider_ode", [x, u, p], [xdot], ["x", "u", "p"], ["xdot"])
-    output = ca.Function("slider_output", [x, p], [x[0]], ["x", "p"], ["y"])
-    y0 = ca.SX.sym("y0", 1)
-    init_state = ca.Function("slider_init_state", [y0, u, p], [ca.vertcat(y0[0], 0)], ["y0", "u0", "p"], ["x0"])
-    return PhysicsSystem(
-        name="slider", Ts=SLIDER_TS, n_sub=4, ode=ode, output=output, init_state=init_state,
-        states=_STATES, inputs=_INPUTS, outputs=_OUTPUTS, parameters=variables, state_scales=(1.0, 1.0),
-        description="mass on a rail with Stribeck friction driven by a force (an integrating plant), RK4",
-        source={"model": "nnfmu.physics.slider", "params": params_to_json(params)},
-    )
+    m = ModelBuilder("slider", Ts=SLIDER_TS, n_sub=4,
+                     description="mass on a rail with Stribeck friction driven by a force (an integrating plant), RK4",
+                     source={"model": "nnfmu.physics.slider", "params": params_to_json(params)})
+    pos = m.state("pos", "m", "position of the mass on the rail")
+    v = m.state("v", "m/s", "velocity of the mass")
+    F = m.input("F", "N", "driving force")
+    P = m.parameters_from(params)
+    m.ode(pos=v, v=(F - _friction(v, P)) / P.m)
+    m.output("pos", "m", "measured position of the mass", pos)  # x0: pos from the measurement, v = 0 (its start)
+    return m.build()
 
 
 register_physics(PhysicsEntry("slider", slider_system, corrected_states=("v",), correction_time=0.1))

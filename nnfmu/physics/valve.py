@@ -22,14 +22,14 @@ with the supply pilot fully open, p reaches 90 % of its final value in about
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
 import casadi as ca
 
 from nnfmu.physics.registry import PhysicsEntry, register_physics
-from nnfmu.physics.base import PhysicsSystem, param, parameter_variables, params_to_json, unpack_parameters
+from nnfmu.physics.base import PhysicsSystem, param, params_to_json
+from nnfmu.physics.builder import ModelBuilder
 from nnfmu.system import Variable
 
 __all__ = ["ValveParams", "valve_system", "VALVE_TS", "VALVE_U_MAX", "VALVE_STATES"]
@@ -142,7 +142,8 @@ def _valve_rhs(x, u, P):
 
 
 def valve_system(params: ValveParams | None = None) -> PhysicsSystem:
-    """The valve as a :class:`PhysicsSystem` (Ts = 40 us, 4 RK4 sub-steps by default).
+    """The valve as a :class:`PhysicsSystem` (Ts = 40 us, 4 RK4 sub-steps by default), written with
+    :class:`ModelBuilder`.
 
     Parameters
     ----------
@@ -151,25 +152,20 @@ def valve_system(params: ValveParams | None = None) -> PhysicsSystem:
         the nominal values of the ``p`` port, not baked in.
     """
     params = ValveParams() if params is None else params
-    variables = parameter_variables(params)
-    x, u = ca.SX.sym("x", 7), ca.SX.sym("u", 2)
-    p = ca.SX.sym("p", len(variables))
-    P = unpack_parameters(params, p)
-    ode = ca.Function("valve_ode", [x, u, p], [_valve_rhs(x, u, P)], ["x", "u", "p"], ["xdot"])
-    output = ca.Function("valve_output", [x, p], [ca.vertcat(x[5], x[4])], ["x", "p"], ["y"])
-    y0 = ca.SX.sym("y0", 2)
-    # Benders at their static deflection, plunger and benders at rest.
-    x0 = ca.vertcat(P.d_u * u[0], 0, P.d_u * u[1], 0, y0[1], y0[0], 0)
-    init_state = ca.Function("valve_init_state", [y0, u, p], [x0], ["y0", "u0", "p"], ["x0"])
-    return PhysicsSystem(
-        name="valve", Ts=VALVE_TS, n_sub=4, ode=ode, output=output, init_state=init_state,
-        # at rest: both pilots closed (0 V), the plunger on its seat, the chamber at ambient pressure
-        states=VALVE_STATES, inputs=_INPUTS, outputs=(_OUTPUTS[0], dataclasses.replace(_OUTPUTS[1], start=params.p_a)),
-        parameters=variables,
-        state_scales=_STATE_SCALES,
-        description="two-stage pneumatic valve (generic model, physics.md section 1), RK4",
-        source={"model": "nnfmu.physics.valve", "params": params_to_json(params)},
-    )
+    m = ModelBuilder("valve", Ts=VALVE_TS, n_sub=4,
+                     description="two-stage pneumatic valve (generic model, physics.md section 1), RK4",
+                     source={"model": "nnfmu.physics.valve", "params": params_to_json(params)})
+    x = ca.vertcat(*[m.state(v.name, v.unit, v.description, scale=scale)
+                     for v, scale in zip(VALVE_STATES, _STATE_SCALES, strict=True)])
+    u = ca.vertcat(*[m.input(v.name, v.unit, v.description, min=v.min, max=v.max) for v in _INPUTS])
+    P = m.parameters_from(params)
+    m.ode(_valve_rhs(x, u, P))
+    # at rest: both pilots closed (0 V), the plunger on its seat, the chamber at ambient pressure
+    m.output(_OUTPUTS[0].name, _OUTPUTS[0].unit, _OUTPUTS[0].description, x[5])
+    m.output(_OUTPUTS[1].name, _OUTPUTS[1].unit, _OUTPUTS[1].description, x[4], start=params.p_a)
+    # Benders at their static deflection, plunger and benders at rest; s and p from the measurement.
+    m.init(z1=P.d_u * u[0], z2=P.d_u * u[1])
+    return m.build()
 
 
 register_physics(PhysicsEntry("valve", valve_system, corrected_states=("p", "sdot"), correction_time=1e-3))
