@@ -60,6 +60,7 @@ RULES: dict[str | tuple[str, str], Rule] = {
     "dropout": Rule(0, 1, hi_open=True), "init_window": Rule(1),
     "lr": Rule(0, 10, lo_open=True, fix="try the default 3e-3"), "weight_decay": Rule(0, 100),
     "clip": Rule(0, fix="0 turns clipping off"), "feedback_noise": Rule(0, 100),
+    "noise": Rule(0, 10, fix="the noise std in output standard deviations, e.g. 0.01"),  # generate
     "epochs": Rule(1, UNBOUNDED_EPOCHS, fix="for a run bounded by time alone, give --max-minutes without "
                                             "--epochs", constant="nnfmu.limits.UNBOUNDED_EPOCHS"),
     "patience": Rule(0, fix="0 turns early stopping off"),

@@ -1,11 +1,13 @@
-"""``nnfmu info FILE.fmu|FILE.pt|DATASET [--json]``: what a file or dataset folder is.
+"""``nnfmu info FILE.fmu|FILE.pt|DATASET|MODEL.py[:NAME]|MODEL.json|valve [--json]``: what a file, dataset
+folder or physics model is.
 
 An FMU: its model, FMI version, platforms, Ts, inputs, outputs and parameters
 with units and ranges, and who generated it. A checkpoint: the network, the
 data it was trained on (channels, Ts, provenance), the training settings and
 how it ended. A dataset folder: Ts, channels with units and their range in the
 train split (as ``nnfmu import`` prints it) and over all splits, splits, init
-window and provenance.
+window and provenance. A physics model (nnfmu.cli._physics_info): each model a ``.py`` file defines (running
+the file), or the one a spec names, with its states, inputs, outputs and parameters (nominal, bounds, free).
 
 The text is a readable summary, one fact per line; ``--json`` prints the raw
 description (where a run bounded by its time budget alone stores
@@ -21,10 +23,12 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("info", help="describe an FMU, a checkpoint or a dataset folder",
-                       description="Describe an FMU (.fmu), a training checkpoint (.pt) or a dataset folder: inputs, "
-                                   "outputs, units, Ts, ranges, provenance and the training summary.")
-    p.add_argument("path", help="an .fmu file, a .pt checkpoint or a dataset folder")
+    p = sub.add_parser("info", help="describe an FMU, a checkpoint, a dataset folder or a physics model",
+                       description="Describe an FMU (.fmu), a training checkpoint (.pt), a dataset folder or a physics "
+                                   "model (file.py lists the models it defines, running its code; file.py:NAME, a "
+                                   ".json physics document, or a built-in name): inputs, outputs, units, Ts, ranges, "
+                                   "parameters, provenance and the training summary.")
+    p.add_argument("path", help="an .fmu file, a .pt checkpoint, a dataset folder or a physics model")
     p.add_argument("--json", action="store_true", help="print the raw description as JSON (default: a readable "
                                                        "summary)")
     p.set_defaults(func=_run)
@@ -32,8 +36,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def describe(path: str | Path) -> dict:
     """A JSON-ready description of an FMU, a checkpoint or a dataset folder (chosen by what ``path`` is)."""
+    from nnfmu.cli._physics_info import describe_physics, is_physics
     from nnfmu.errors import DataFileError
 
+    if is_physics(str(path)):
+        return describe_physics(str(path))
     path = Path(path)
     if path.is_dir():
         return _dataset(path)
@@ -42,8 +49,9 @@ def describe(path: str | Path) -> dict:
     if path.suffix.lower() in (".pt", ".pth"):
         return _checkpoint(path)
     if not path.exists():
-        raise DataFileError(f"{path} not found; give an .fmu file, a .pt checkpoint or a dataset folder")
-    raise DataFileError(f"{path} is neither an .fmu, a .pt checkpoint nor a dataset folder")
+        raise DataFileError(f"{path} not found; give an .fmu file, a .pt checkpoint, a dataset folder or a physics "
+                            f"model (file.py[:NAME], .json, or a built-in name)")
+    raise DataFileError(f"{path} is neither an .fmu, a .pt checkpoint, a dataset folder nor a physics model")
 
 
 def _range(values) -> list[float]:
@@ -129,6 +137,10 @@ _TITLES = {"init_window": "init window", "model_config": "network", "train_confi
 
 def render(doc: dict) -> str:
     """The description as readable lines: a heading, the channels, then one indented line per setting."""
+    if doc["kind"] == "physics":
+        from nnfmu.cli._physics_info import render_physics
+
+        return render_physics(doc)
     lines = [f"{doc['path']}: {doc['kind']}"]
     head = {"dataset": ("Ts",), "fmu": ("model", "description", "fmi_version", "interfaces", "platforms", "Ts",
                                         "generation_tool", "generated"), "checkpoint": ("name", "Ts")}[doc["kind"]]

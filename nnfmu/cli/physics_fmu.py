@@ -1,9 +1,10 @@
-"""``nnfmu physics-fmu valve|arm -o X.fmu``: a physics reference model as an FMU, RK4 inside doStep.
+"""``nnfmu physics-fmu SPEC -o X.fmu``: a physics model as an FMU, RK4 inside doStep, the ODE for Model Exchange.
 
-The model is :meth:`nnfmu.physics.PhysicsSystem.model` (fixed-step RK4 with
-``n_sub`` sub-steps per sample), written by the same builder as the networks.
-Its physical parameters become tunable FMU parameters unless
-``--fixed-parameters`` bakes them in.
+SPEC is a registered model (valve, arm, slider), a model of your own ``path/to/file.py:NAME`` (loading it
+runs that file's code; docs/own-physics.md) or a ``.json`` physics document or grey-box fit result. The
+model is :meth:`nnfmu.physics.PhysicsSystem.model` (fixed-step RK4 with ``n_sub`` sub-steps per sample),
+written by the same builder as the networks; the FMU is standalone C and never needs the model file again.
+Its physical parameters become tunable FMU parameters unless ``--fixed-parameters`` bakes them in.
 """
 
 from __future__ import annotations
@@ -13,13 +14,14 @@ from pathlib import Path
 
 from nnfmu.cli.export import add_fmu_options, check_fmu_options, write_fmu
 
-SYSTEMS = ("valve", "arm")
-
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("physics-fmu", help="write a physics reference model (valve, arm) as an FMU")
-    p.add_argument("system", choices=SYSTEMS, help="which physics model")
-    p.add_argument("-o", "--out", help="the .fmu file to write (default: <system>.fmu)")
+    p = sub.add_parser("physics-fmu", help="write a physics model (built-in or your own) as an FMU",
+                       description="Write a physics model as an FMU (co-simulation with RK4, and Model Exchange). "
+                                   "SPEC: a built-in model (valve, arm, slider), path/to/file.py:NAME (runs that "
+                                   "file's code) or a .json physics document or grey-box fit result.")
+    p.add_argument("system", metavar="SPEC", help="which physics model: valve, arm, slider, file.py:NAME or a .json")
+    p.add_argument("-o", "--out", help="the .fmu file to write (default: <model name>.fmu)")
     add_fmu_options(p)
     p.add_argument("--n-sub", type=int, metavar="N",
                    help="RK4 sub-steps per sample (default: the model's own choice)")
@@ -28,23 +30,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run)
 
 
-def physics_system(name: str):
-    """The :class:`nnfmu.physics.PhysicsSystem` called ``name`` with its nominal parameters."""
-    import importlib
+def physics_system(spec: str):
+    """The :class:`nnfmu.physics.PhysicsSystem` that ``spec`` names, at its nominal parameters."""
+    from nnfmu.physics import resolve_physics
 
-    from nnfmu.errors import ConfigError
-
-    if name not in SYSTEMS:
-        raise ConfigError(f"unknown physics system {name!r}; choose one of {', '.join(SYSTEMS)}")
-    return getattr(importlib.import_module(f"nnfmu.physics.{name}"), f"{name}_system")()
+    return resolve_physics(spec)
 
 
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import check_writable
 
     check_fmu_options(args)
-    out = Path(args.out or f"{args.system}.fmu")
+    system = physics_system(args.system)
+    out = Path(args.out or f"{system.name}.fmu")
     check_writable(out)
-    model = physics_system(args.system).model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
+    model = system.model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
     write_fmu(model, out, args)
     return 0

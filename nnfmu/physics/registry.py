@@ -1,7 +1,9 @@
 """Which physics models the toolkit knows, by one name: the built-in ones and the user's own.
 
-A *spec* names a physics model: a registered name (``"valve"``, ``"arm"``, ``"slider"``) or
-a :class:`PhysicsSystem` itself. Each built-in model registers itself in its own module
+A *spec* names a physics model: a registered name (``"valve"``, ``"arm"``, ``"slider"``), a
+user's model file ``path/to/file.py:NAME`` (loading it runs the file's code; :mod:`nnfmu.physics.model_file`),
+a ``.json`` physics document or grey-box fit result, or a :class:`PhysicsSystem` itself. Each built-in
+model registers itself in its own module
 (``register_physics(PhysicsEntry("valve", valve_system, ...))``), so adding a model is one
 module and one registration. Every command and API that takes a physics model resolves it
 here (:func:`resolve_physics`); ``--physics`` choices come from :func:`physics_names`.
@@ -9,6 +11,7 @@ here (:func:`resolve_physics`); ``--physics`` choices come from :func:`physics_n
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Callable
 
@@ -70,7 +73,21 @@ def physics_entry(name: str) -> PhysicsEntry:
 
 
 def resolve_physics(spec: str | PhysicsSystem) -> PhysicsSystem:
-    """The :class:`PhysicsSystem` a spec names (a registered name, or the system itself)."""
+    """The :class:`PhysicsSystem` a spec names.
+
+    ``spec``: the system itself; a registered name; ``path/to/file.py:NAME`` (runs the file, calls
+    ``NAME()``; ``file.py`` alone when it defines one model); or ``path/to/file.json`` (a physics document,
+    or a grey-box fit result holding one under ``"physics"``). Errors name the file and the fix.
+    """
     if isinstance(spec, PhysicsSystem):
         return spec
-    return physics_entry(str(spec)).build()
+    from nnfmu.physics.model_file import is_file_spec, model_from_file, model_from_json, split_spec
+
+    spec = os.fspath(spec) if isinstance(spec, os.PathLike) else str(spec)
+    if is_file_spec(spec):
+        path, name = split_spec(spec)
+        return model_from_json(path) if path.suffix.lower() == ".json" else model_from_file(path, name)
+    try:
+        return physics_entry(spec).build()
+    except ConfigError as exc:
+        raise ConfigError(f"{exc}, or give a model file path/to/file.py:NAME or a .json physics document") from None
