@@ -164,5 +164,5 @@ def test_a_changed_computation_is_caught_by_the_verification():
 
 
 def test_something_that_is_not_a_step_model_is_refused():
-    with pytest.raises(ExportError, match="cannot export a GRU; to_casadi knows MLPStepModel"):
+    with pytest.raises(ExportError, match="cannot export a GRU; to_casadi exports the StepModels of nnfmu.models"):
         to_casadi(nn.GRU(2, 4))

@@ -14,7 +14,7 @@ from __future__ import annotations
 import casadi as ca
 
 from nnfmu.export import casadi_nets as nets
-from nnfmu.models import RecurrentStepModel, StepModel, TCNStepModel, tcn_state
+from nnfmu.models import StepModel, tcn_state
 
 
 def _rows(column, n_rows: int, width: int) -> list:
@@ -27,21 +27,30 @@ def _last(samples: list, n: int, pad) -> list:
     return [pad] * max(0, n - len(samples)) + samples[max(0, len(samples) - n):]
 
 
-def _state_expr(model: StepModel, ys: list, us: list):
-    """``x0`` from the window's normalised samples ``ys``, ``us`` (lists of columns, oldest first, newest = t0)."""
+# ``x0`` of each of the five networks from the window's normalised samples ``ys``, ``us`` (lists of columns,
+# oldest first, newest = t0): the ``casadi_init`` of their records (nnfmu.models.builtin).
+def recurrent_init(model, ys: list, us: list):
+    """RNN/LSTM/GRU: ``[y0 | 0]`` at rest, or ``[y0 | encoder(window)]`` (:mod:`nnfmu.models.encoder`)."""
     c = model.config
-    if isinstance(model, RecurrentStepModel):
-        if c.init_window == 1:
-            return ca.vertcat(ys[-1], ca.DM.zeros(model.n_x - c.n_y, 1))
-        seen = [y - ys[-1] for y in ys] if c.increment else ys
-        flat = ca.vertcat(*[ca.vertcat(y, u) for y, u in zip(seen, us)])
-        return ca.vertcat(ys[-1], nets.module_expr(model.encoder, flat, "encoder"))
-    L = c.window
-    if isinstance(model, TCNStepModel):
-        if c.init_window == 1:
-            return _tcn_rest(model, ys[-1], us[-1])
-        samples = [ca.vertcat(y, u) for y, u in zip(_last(ys[:-1], L - 1, ys[0]), _last(us[:-1], L - 1, us[0]))]
-        return _tcn_from_window(model, samples, ys[-1])
+    if c.init_window == 1:
+        return ca.vertcat(ys[-1], ca.DM.zeros(model.n_x - c.n_y, 1))
+    seen = [y - ys[-1] for y in ys] if c.increment else ys
+    flat = ca.vertcat(*[ca.vertcat(y, u) for y, u in zip(seen, us)])
+    return ca.vertcat(ys[-1], nets.module_expr(model.encoder, flat, "encoder"))
+
+
+def tcn_init(model, ys: list, us: list):
+    """TCN: the delay lines at rest, or filled from the window (:mod:`nnfmu.models.tcn_state`)."""
+    L = model.config.window
+    if model.config.init_window == 1:
+        return _tcn_rest(model, ys[-1], us[-1])
+    samples = [ca.vertcat(y, u) for y, u in zip(_last(ys[:-1], L - 1, ys[0]), _last(us[:-1], L - 1, us[0]))]
+    return _tcn_from_window(model, samples, ys[-1])
+
+
+def window_init(model, ys: list, us: list):
+    """MLP: its window, the last ``L`` outputs and ``L - 1`` inputs (padded with the oldest sample)."""
+    L = model.config.window
     return ca.vertcat(*_last(ys, L, ys[0]), *_last(us[:-1], L - 1, us[0]))
 
 
@@ -52,12 +61,12 @@ def relative_taps(columns: list, n_y: int) -> list:
     return [ca.vertcat(col[:n_y] - newest, col[n_y:]) for col in columns]
 
 
-def _tcn_column(model: TCNStepModel, i: int, taps: list):
+def _tcn_column(model, i: int, taps: list):
     taps = relative_taps(taps, model.config.n_y) if i == 0 and model.config.increment else taps
     return nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], taps), "activation")
 
 
-def _tcn_rest(model: TCNStepModel, yn0, un0):
+def _tcn_rest(model, yn0, un0):
     """The rest state: each line holds the column its layer's input has when every past sample is [y0, u0]."""
     h, lines = ca.vertcat(yn0, un0), []
     for i, (n, _) in enumerate(tcn_state.line_shapes(model.config)):
@@ -67,7 +76,7 @@ def _tcn_rest(model: TCNStepModel, yn0, un0):
     return ca.vertcat(yn0, *lines)
 
 
-def _tcn_from_window(model: TCNStepModel, samples: list, yn):
+def _tcn_from_window(model, samples: list, yn):
     """The delay lines from the ``L - 1`` samples ``[y_j, u_j]`` before t0 (as :func:`tcn_state.from_window`)."""
     h, lines, k = samples, [], model.config.kernel_size
     for i, (n, _) in enumerate(tcn_state.line_shapes(model.config)):
@@ -80,8 +89,11 @@ def _tcn_from_window(model: TCNStepModel, samples: list, yn):
     return ca.vertcat(yn, *lines)
 
 
-def init_function(model: StepModel, u_mean, u_std, y_mean, y_std) -> ca.Function:
-    """``init`` of ``model`` in physical units (normalisation constants as ``casadi.DM`` columns)."""
+def init_function(model: StepModel, state_expr, u_mean, u_std, y_mean, y_std) -> ca.Function:
+    """``init`` of ``model`` in physical units (normalisation constants as ``casadi.DM`` columns).
+
+    ``state_expr(model, ys, us) -> x0``: its architecture's ``casadi_init`` (normalised samples, oldest first).
+    """
     c = model.config
     n_past = c.init_window - 1
     y0, u0 = ca.MX.sym("y0", c.n_y), ca.MX.sym("u0", c.n_u)
@@ -91,5 +103,5 @@ def init_function(model: StepModel, u_mean, u_std, y_mean, y_std) -> ca.Function
         y_past, u_past = ca.MX.sym("y_past", n_past * c.n_y), ca.MX.sym("u_past", n_past * c.n_u)
         ins, names = ins + [y_past, u_past], names + ["y_past", "u_past"]
         ys, us = _rows(y_past, n_past, c.n_y) + ys, _rows(u_past, n_past, c.n_u) + us
-    x0 = _state_expr(model, [(y - y_mean) / y_std for y in ys], [(u - u_mean) / u_std for u in us])
+    x0 = state_expr(model, [(y - y_mean) / y_std for y in ys], [(u - u_mean) / u_std for u in us])
     return ca.Function("init", ins, [x0], names, ["x0"])

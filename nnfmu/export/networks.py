@@ -27,16 +27,13 @@ import torch
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_nets as nets
 from nnfmu.export.ensemble import ensemble_to_casadi, with_y
-from nnfmu.export.exporters import exporter_for
 from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.identifiers import to_c_identifier
-from nnfmu.models import EnsembleStepModel, MLPStepModel, RecurrentStepModel, StepModel, TCNStepModel
-from nnfmu.models import tcn_state
+from nnfmu.models import EnsembleStepModel, StepModel, architectures, tcn_state
 from nnfmu.models.linear_path import LinearPathStepModel, y_slot
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables, with_starts
 
-_MODEL_CLASSES = (MLPStepModel, RecurrentStepModel, TCNStepModel)
 _VERIFY_RTOL = 1e-9
 
 
@@ -47,7 +44,8 @@ def _check_modules(model: StepModel) -> None:
             raise nets.unsupported(name, module)
 
 
-def _recurrent_step(model: RecurrentStepModel, x, un):
+def recurrent_step(model, x, un):
+    """The RNN/LSTM/GRU step (:class:`~nnfmu.models.RecurrentStepModel`; layout: :mod:`nnfmu.models.recurrent`)."""
     c = model.config
     yn = x[0:c.n_y]
     n_blocks = c.layers * (2 if model.is_lstm else 1)
@@ -65,7 +63,7 @@ def _recurrent_step(model: RecurrentStepModel, x, un):
     return ca.vertcat(yn_next, *new_h, *new_c), yn_next
 
 
-def _tcn_step(model: TCNStepModel, x, un):
+def tcn_step(model, x, un):
     """The incremental TCN step on its delay lines (layout: :mod:`nnfmu.models.tcn_state`)."""
     c = model.config
     yn, h, offset, new_lines = x[0:c.n_y], ca.vertcat(x[0:c.n_y], un), c.n_y, []
@@ -80,7 +78,8 @@ def _tcn_step(model: TCNStepModel, x, un):
     return ca.vertcat(yn_next, *new_lines), yn_next
 
 
-def _window_step(model: MLPStepModel, x, un):
+def window_step(model, x, un):
+    """The MLP step on its window (:class:`~nnfmu.models.MLPStepModel`; layout: :mod:`nnfmu.models.window`)."""
     c = model.config
     L = c.window
     ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
@@ -104,9 +103,10 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     Parameters
     ----------
     model : StepModel
-        An MLP, RNN, LSTM, GRU or TCN of :mod:`nnfmu.models` (any dtype; weights are taken in float64),
-        or a hybrid (:mod:`nnfmu.hybrid`): then the ports are ``init(y0, u0, p)`` and
-        ``step(x, u, p)``, with ``p`` the physical parameters (see :func:`nnfmu.hybrid.hybrid_to_casadi`).
+        A model of a registered architecture (any dtype; weights are taken in float64): its record's
+        ``casadi_step`` and ``casadi_init`` give the step and the initial state in normalised units
+        (:mod:`nnfmu.models.architectures`), or its ``to_casadi`` the whole export (the hybrid: then the
+        ports are ``init(y0, u0, p)`` and ``step(x, u, p)``, with ``p`` the physical parameters).
     verify : bool
         Compare one step of the result with the torch step from a random state (relative 1e-9).
 
@@ -115,9 +115,6 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
     ExportError
         For a layer or model class the builders do not know, or a failed verification.
     """
-    exporter = exporter_for(model)
-    if exporter is not None:  # a model class of a package above export (nnfmu.hybrid), nnfmu.export.exporters
-        return exporter.to_casadi(model, verify=verify)
     if isinstance(model, EnsembleStepModel):
         init, step = ensemble_to_casadi(model, lambda member: to_casadi(member, verify=False))
         if verify:
@@ -128,21 +125,31 @@ def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca
         if verify:
             verify_export(model, init, step)
         return init, step
-    if not isinstance(model, _MODEL_CLASSES):
-        raise ExportError(f"cannot export a {type(model).__name__}; to_casadi knows "
-                          f"{', '.join(cls.__name__ for cls in _MODEL_CLASSES)} from nnfmu.models")
+    record = _record(model)
+    if record.to_casadi is not None:  # an architecture with an export of its own (the hybrid)
+        return record.get("to_casadi")(model, verify=verify)
     _check_modules(model)
     c = model.config
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
     u_mean, u_std, y_mean, y_std = (nets.dm(b) for b in (model.u_mean, model.u_std, model.y_mean, model.y_std))
-    init = init_function(model, u_mean, u_std, y_mean, y_std)
-    builder = (_recurrent_step if isinstance(model, RecurrentStepModel)
-               else _tcn_step if isinstance(model, TCNStepModel) else _window_step)
-    x_next, yn_next = builder(model, x, (u - u_mean) / u_std)
+    init = init_function(model, record.get("casadi_init"), u_mean, u_std, y_mean, y_std)
+    x_next, yn_next = record.get("casadi_step")(model, x, (u - u_mean) / u_std)
     step = ca.Function("step", [x, u], [x_next, yn_next * y_std + y_mean], ["x", "u"], ["x_next", "y_next"])
     if verify:
         verify_export(model, init, step)
     return init, step
+
+
+def _record(model: StepModel) -> architectures.Architecture:
+    """The record of ``model``'s architecture; ExportError unless it says how to export it."""
+    if not isinstance(model, StepModel):
+        raise ExportError(f"cannot export a {type(model).__name__}; to_casadi exports the StepModels of "
+                          "nnfmu.models and of the architectures registered with it")
+    record = architectures.architecture(model.config.arch)
+    if record.casadi_step is None and record.to_casadi is None:
+        raise ExportError(f"the architecture {record.name!r} does not say how to export it: its record "
+                          "(nnfmu.models.architectures.Architecture) needs casadi_step and casadi_init")
+    return record
 
 
 def _linear_path_to_casadi(model: LinearPathStepModel) -> tuple[ca.Function, ca.Function]:
@@ -202,12 +209,12 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
     """The network as a :class:`~nnfmu.system.CasadiModel`: :func:`to_casadi` plus a SystemSpec from ``model.meta``.
 
     ``name`` (a C identifier) defaults to the meta's name; the spec's ``source``
-    records the architecture, its config and the checkpoint's provenance. A hybrid's
-    physical parameters (their trained values) become the spec's parameters.
+    records the architecture, its config and the checkpoint's provenance. An architecture with an export
+    of its own (the hybrid: its physical parameters become the spec's parameters) makes its own.
     """
-    exporter = exporter_for(model)
-    if exporter is not None:
-        return exporter.casadi_model(model, name=name)
+    record = _record(model)
+    if record.casadi_model is not None:
+        return record.get("casadi_model")(model, name=name)
     init, step = to_casadi(model)
     meta = model.meta
     channels = [{k: ch[k] for k in ("name", "unit", "description") if k in ch} for ch in meta["outputs"]]

@@ -1,7 +1,7 @@
 """Hybrid models: a CasADi physics model plus a neural correction, trained in torch and exported as one FMU.
 
-- :class:`HybridConfig` (``arch="hybrid"``) and :class:`HybridStepModel`: physics ODE (valve or
-  arm, parameters possibly wrong) + an MLP correcting the state derivative inside the RK4 step
+- :class:`HybridConfig` (``arch="hybrid"``) and :class:`HybridStepModel`: physics ODE (a registered
+  physics model, parameters possibly wrong) + an MLP correcting the state derivative inside the RK4 step
   (or the discrete step); physical parameters optionally trained. Built, trained, saved and
   loaded like any network (``build_model``, ``train``, ``load_model``).
 - :func:`hybrid_to_casadi`, :func:`hybrid_casadi_model`: the export (also reached through
@@ -10,39 +10,92 @@
   :func:`compiled_to_torch` (compiled C forward and reverse mode; fast) or :func:`sx_to_torch`
   (a :class:`TorchFunction` translating the SX instructions into torch operations).
 - :func:`load_physics_params`: read a JSON parameter file; :data:`PHYSICS`: the physics models.
+
+The hybrid is an architecture like the networks: this module registers its record
+(:mod:`nnfmu.models.architectures`) and is found through the entry point ``nnfmu.architectures``
+(``hybrid = "nnfmu.hybrid"``). Its names are imported on first use, so that registering imports
+neither torch nor CasADi (``nnfmu --help`` lists the hybrid's options without them).
 """
 
-from nnfmu.hybrid._sx_source import SUPPORTED_OPS
-from nnfmu.hybrid.casadi_torch import GRADIENT_MODES, TorchFunction, sx_to_torch
-from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_torch, compiled_to_torch
-from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, PHYSICS, HybridConfig, load_physics_params, physics_system
-from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
-from nnfmu.hybrid.model import HybridStepModel
-from nnfmu.export.exporters import register_exporter
-from nnfmu.models.architectures import register_architecture
+from nnfmu._lazy import lazy_exports
+from nnfmu.errors import ConfigError
+from nnfmu.models.architectures import Architecture, Option, register_architecture
 
-# models/ and export/ stay below hybrid/: the hybrid architecture registers itself and its exporter (and is
-# found through the "nnfmu.architectures" entry point when a stored config names it before anything imported
-# this package).
-register_architecture(HYBRID_ARCH, config_class=HybridConfig, model_class=HybridStepModel)
-register_exporter(HybridStepModel, to_casadi=hybrid_to_casadi, casadi_model=hybrid_casadi_model)
+_LAZY = {
+    "SUPPORTED_OPS": "nnfmu.hybrid._sx_source",
+    "GRADIENT_MODES": "nnfmu.hybrid.casadi_torch",
+    "TorchFunction": "nnfmu.hybrid.casadi_torch",
+    "sx_to_torch": "nnfmu.hybrid.casadi_torch",
+    "BACKENDS": "nnfmu.hybrid.compiled_torch",
+    "CompiledFunction": "nnfmu.hybrid.compiled_torch",
+    "casadi_to_torch": "nnfmu.hybrid.compiled_torch",
+    "compiled_to_torch": "nnfmu.hybrid.compiled_torch",
+    "CORRECTIONS": "nnfmu.hybrid.config",
+    "HYBRID_ARCH": "nnfmu.hybrid.config",
+    "PHYSICS": "nnfmu.hybrid.config",
+    "HybridConfig": "nnfmu.hybrid.config",
+    "load_physics_params": "nnfmu.hybrid.config",
+    "physics_system": "nnfmu.hybrid.config",
+    "hybrid_casadi_model": "nnfmu.hybrid.export",
+    "hybrid_to_casadi": "nnfmu.hybrid.export",
+    "HybridStepModel": "nnfmu.hybrid.model",
+}
 
-__all__ = [
-    "BACKENDS",
-    "CORRECTIONS",
-    "GRADIENT_MODES",
-    "HYBRID_ARCH",
-    "PHYSICS",
-    "SUPPORTED_OPS",
-    "CompiledFunction",
-    "HybridConfig",
-    "HybridStepModel",
-    "TorchFunction",
-    "casadi_to_torch",
-    "compiled_to_torch",
-    "hybrid_casadi_model",
-    "hybrid_to_casadi",
-    "load_physics_params",
-    "physics_system",
-    "sx_to_torch",
-]
+__all__ = sorted(_LAZY)
+
+__getattr__, __dir__ = lazy_exports("nnfmu.hybrid", globals(), _LAZY)
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """``"k_s, C_max"`` -> ``("k_s", "C_max")``."""
+    return tuple(n.strip() for n in text.split(",") if n.strip())
+
+
+def _counting_config(config):
+    """The config whose parameters are counted on torch's meta device: the physics in torch operations (the
+    compiled backend would compile C first)."""
+    return config.replace(physics_backend="sx")
+
+
+def _check_device(config, device) -> None:
+    if device.type != "cpu" and config.physics_backend == "compiled":
+        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
+                          "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
+
+
+# The choices below are those of nnfmu.hybrid.config (CORRECTIONS) and nnfmu.hybrid.compiled_torch (BACKENDS),
+# written out so that the command line needs neither torch nor CasADi (tests/test_hybrid_cli.py compares them).
+register_architecture(Architecture(
+    name="hybrid",
+    config_class="nnfmu.hybrid.config:HybridConfig",
+    model_class="nnfmu.hybrid.model:HybridStepModel",
+    summary="a physics model plus a neural correction; see --physics",
+    to_casadi="nnfmu.hybrid.export:hybrid_to_casadi",
+    casadi_model="nnfmu.hybrid.export:hybrid_casadi_model",
+    options=(
+        Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",
+               choices="nnfmu.physics.registry:physics_names", open_choices=True,
+               help="the physics model the network corrects: a registered one (%(choices)s) or FILE.py:NAME, "
+                    "a model of your own"),
+        Option(flag="--physics-params", field="physics_params", metavar="FILE.json",
+               parse="nnfmu.hybrid.config:load_physics_params",
+               help="JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} "
+                    "(default: nominal)"),
+        Option(flag="--train-physics", field="train_physics", metavar="NAME,...", parse=_names,
+               help="comma-separated physical parameters trained with the network, in log-space (default: none)"),
+        Option(flag="--correction", field="correction", choices=("derivative", "step"),
+               help="where the network corrects the physics: derivative (inside every RK4 stage, default) or "
+                    "step (after it)"),
+        Option(flag="--n-sub", field="n_sub", type="int", metavar="N",
+               help="RK4 sub-steps per sample (default: the physics' own)"),
+        Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
+               help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
+                    "needed)"),
+    ),
+    data_plan=False,
+    linear_path=False,
+    strategies=("parallel",),
+    dtype="float64",
+    counting_config=_counting_config,
+    check_device=_check_device,
+))

@@ -1,76 +1,239 @@
-"""Which config and model class serve each architecture name: a registry other packages fill in.
+"""Architectures, the unit of extension: one registration record holds all the toolkit knows about one.
 
-``nnfmu.models`` registers its five networks. A package built on top of it (``nnfmu.hybrid``,
-or a third party) registers its own architecture when it is imported::
+An architecture is a config class, a model class (a :class:`~nnfmu.models.StepModel`) and how to
+export, train, search and offer it on the command line. Its package registers one
+:class:`Architecture` record when it is imported::
 
-    register_architecture("hybrid", config_class=HybridConfig, model_class=HybridStepModel)
+    register_architecture(Architecture(
+        name="toy", config_class="toy_arch.model:ToyConfig", model_class="toy_arch.model:ToyStepModel",
+        casadi_step="toy_arch.export:casadi_step", casadi_init="toy_arch.export:casadi_init"))
 
-so that ``models`` never imports the packages above it. A checkpoint names its architecture
-only as a string; when that name is not registered yet, the package that provides it is found
-through the entry-point group ``nnfmu.architectures`` (entry name = architecture, value = the
-module to import, e.g. ``hybrid = "nnfmu.hybrid"`` in nnfmu's own ``pyproject.toml``).
-This module imports neither torch nor the architectures themselves.
+and every part of the toolkit looks the record up by the config's ``arch`` (:func:`architecture`):
+nothing outside an architecture's own modules tests its name or its class. The record names
+classes and functions either directly or lazily as ``"module:attribute"`` strings, imported on
+first use (:func:`resolve`), so that registering costs no import of torch or CasADi and
+``nnfmu --help`` stays fast.
+
+Where the records come from:
+
+- :mod:`nnfmu.models.builtin` registers the five networks (imported with :mod:`nnfmu.models`);
+- a package above ``models`` (``nnfmu.hybrid``, or a third party) registers its own when imported;
+- :func:`load_plugins` imports the modules the entry-point group ``nnfmu.architectures`` names
+  (an installed package: entry name = architecture, value = module, e.g. ``hybrid = "nnfmu.hybrid"``
+  in nnfmu's own ``pyproject.toml``) and those listed in the environment variable ``NNFMU_PLUGINS``
+  (module names separated by commas, importable from ``sys.path``/``PYTHONPATH``; how a command-line
+  user loads an architecture that is not installed as a package). A lookup of an unknown name
+  loads them first, so a checkpoint that names a plugin's architecture loads by itself.
+
+This module imports neither torch nor CasADi nor any architecture.
 """
 
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import entry_points
+import os
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
 
 from nnfmu.errors import ConfigError
 
+__all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "architecture", "config_class",
+           "load_plugins", "model_class", "names", "records", "register_architecture", "registered", "resolve"]
+
 ENTRY_POINT_GROUP = "nnfmu.architectures"
+PLUGINS_ENV = "NNFMU_PLUGINS"
 
-_CONFIG_CLASSES: dict[str, type] = {}
-_MODEL_CLASSES: dict[str, type] = {}
+#: A class or function given directly, or lazily as ``"package.module:attribute"``.
+Ref = Any
 
 
-def register_architecture(arch: str, *, config_class: type | None = None, model_class: type | None = None) -> None:
-    """Make ``arch`` known: its config class (``from_dict`` of a stored config) and its model class (``build_model``).
+def resolve(ref: Ref):
+    """The object ``ref`` names: ``"module:attr.sub"`` imported on first use; anything else returned as is."""
+    if not isinstance(ref, str):
+        return ref
+    module, sep, attr = ref.partition(":")
+    if not sep:
+        raise ConfigError(f"an architecture record names {ref!r}; write a lazy reference as 'package.module:name'")
+    obj = importlib.import_module(module)
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
 
-    Registering the same classes again is a no-op; another class under a taken name is an error.
+
+@dataclass(frozen=True, kw_only=True)
+class Option:
+    """One command-line option of ``nnfmu train`` that an architecture's config adds (``--flag`` -> ``field``).
+
+    ``type``: ``"str"``, ``"int"`` or ``"float"``. ``choices``: a tuple, or a reference to a function
+    returning the names; ``open_choices``: the names are listed in the help but any value passes on to
+    the config, which checks it (e.g. a physics model given as ``FILE.py:NAME``). ``parse``: a reference
+    to ``str -> value`` applied before the value reaches the config (e.g. reading a file).
+    ``required``: ``nnfmu train --arch NAME`` refuses to start without it.
     """
-    for table, cls in ((_CONFIG_CLASSES, config_class), (_MODEL_CLASSES, model_class)):
-        if cls is None:
+
+    flag: str
+    field: str
+    help: str
+    type: str = "str"
+    choices: tuple | Ref | None = None
+    open_choices: bool = False
+    metavar: str | None = None
+    parse: Ref | None = None
+    required: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class Architecture:
+    """Everything the toolkit needs to know about one architecture.
+
+    Attributes
+    ----------
+    name : str
+        The ``arch`` of its configs, ``nnfmu train --arch NAME``.
+    config_class, model_class : class or ``"module:attr"``
+        The frozen config (a :class:`~nnfmu.models.ModelConfig` subclass, or ModelConfig itself for the five
+        networks) and the :class:`~nnfmu.models.StepModel` built from it, ``model_class(config, meta)``.
+    summary : str
+        A few words for ``--arch``'s help.
+    casadi_step : ``(model, x, un) -> (x_next, yn_next)``, optional
+        The step as CasADi MX expressions in normalised units (``x``: the flat state, ``un``: the normalised
+        input column); :func:`nnfmu.export.to_casadi` adds the normalisation, ``init`` and the check against torch.
+    casadi_init : ``(model, ys, us) -> x0``, optional
+        The initial state from the init window's normalised samples (lists of columns, oldest first,
+        the newest ``y0``, ``u0``; one each without an init window).
+    to_casadi, casadi_model : ``(model, *, verify) -> (init, step)``, ``(model, *, name) -> CasadiModel``, optional
+        A whole export instead of ``casadi_step``/``casadi_init`` (a model with ports of its own, such as the
+        hybrid's physical parameters), used by :func:`nnfmu.export.to_casadi` and :func:`~nnfmu.export.casadi_model`.
+    rollout_cell : {'rnn', 'lstm', 'gru'}, optional
+        The cell of the compiled free run (:mod:`nnfmu.training.compiled_rollout`) that computes this
+        architecture's step, for a model of exactly ``model_class``; None: torch runs the free run.
+    options : tuple of Option
+        Options of ``nnfmu train`` that only this architecture takes (its own config fields).
+    grid : mapping field -> values
+        The architecture's own part of the paper-size tune grid (e.g. ``{"layers": (1, 2)}``).
+    search_rank : int, optional
+        Place in the architectures that ``nnfmu train --max-minutes`` searches (lowest first); None: not searched.
+    data_plan, linear_path : bool
+        Whether ``nnfmu train`` chooses windows, batch, budget, validation tail and a linear path from the data
+        for it, and whether it may sit on a linear path (``linear_order > 0``).
+    strategies : tuple of str
+        The training strategies it takes (the first is the default).
+    dtype : str
+        The default training dtype.
+    counting_config : ``config -> config``, optional
+        The config to build on torch's ``meta`` device when counting parameters (one that compiles nothing).
+    check_device : ``(config, device) -> None``, optional
+        Raise :class:`~nnfmu.errors.ConfigError` if the model cannot train on ``device``.
+    """
+
+    name: str
+    config_class: Ref
+    model_class: Ref
+    summary: str = ""
+    casadi_step: Ref | None = None
+    casadi_init: Ref | None = None
+    to_casadi: Ref | None = None
+    casadi_model: Ref | None = None
+    rollout_cell: str | None = None
+    options: tuple[Option, ...] = ()
+    grid: Mapping[str, tuple] = field(default_factory=dict)
+    search_rank: int | None = None
+    data_plan: bool = True
+    linear_path: bool = True
+    strategies: tuple[str, ...] = ("parallel", "series-parallel")
+    dtype: str = "float32"
+    counting_config: Ref | None = None
+    check_device: Ref | None = None
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.name, str) and self.name.isascii() and self.name.isidentifier()):
+            raise ConfigError(f"an architecture's name must be a plain ASCII identifier, got {self.name!r}")
+        if (self.casadi_step is None) != (self.casadi_init is None):
+            raise ConfigError(f"architecture {self.name!r}: give casadi_step and casadi_init together")
+        if (self.to_casadi is None) != (self.casadi_model is None):
+            raise ConfigError(f"architecture {self.name!r}: give to_casadi and casadi_model together")
+        object.__setattr__(self, "options", tuple(self.options))
+        object.__setattr__(self, "grid", MappingProxyType({k: tuple(v) for k, v in dict(self.grid).items()}))
+
+    def get(self, attribute: str):
+        """The record's ``attribute`` with a lazy reference resolved (None stays None)."""
+        value = getattr(self, attribute)
+        return None if value is None else resolve(value)
+
+
+_RECORDS: dict[str, Architecture] = {}
+
+
+def register_architecture(record: Architecture) -> Architecture:
+    """Make ``record.name`` known. The same record again is a no-op; another under a taken name is an error."""
+    if not isinstance(record, Architecture):
+        raise ConfigError(f"register_architecture takes an Architecture record, got {type(record).__name__}")
+    taken = _RECORDS.get(record.name)
+    if taken is not None and taken != record:
+        raise ConfigError(f"architecture {record.name!r} is already registered; choose another name")
+    _RECORDS[record.name] = record
+    return record
+
+
+_loaded: set[str] = set()
+
+
+def _plugin_modules() -> list[str]:
+    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
+    from importlib.metadata import entry_points
+
+    return [ep.value.split(":")[0] for ep in entry_points(group=ENTRY_POINT_GROUP)] + [m for m in listed if m]
+
+
+def load_plugins() -> None:
+    """Import every module that the entry points and ``NNFMU_PLUGINS`` name, once each (they register themselves)."""
+    for module in _plugin_modules():
+        if module in _loaded:
             continue
-        if table.get(arch, cls) is not cls:
-            raise ConfigError(f"architecture {arch!r} is already registered with {table[arch].__name__}; "
-                              f"choose another name for {cls.__name__}")
-        table[arch] = cls
+        _loaded.add(module)
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ConfigError(f"cannot import the architecture plugin {module!r} ({exc}); install it, put its folder "
+                              f"on PYTHONPATH, or drop it from {PLUGINS_ENV}") from exc
 
 
-def _discover(arch: str) -> None:
-    """Import the module that the ``nnfmu.architectures`` entry point ``arch`` names (it registers itself)."""
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name == arch:
-            importlib.import_module(ep.value.split(":")[0])
-            return
+def architecture(arch: str) -> Architecture:
+    """The record of ``arch``; :class:`ConfigError` listing the known names otherwise."""
+    if arch not in _RECORDS:
+        load_plugins()
+    if arch not in _RECORDS:
+        raise ConfigError(f"unknown architecture {arch!r}; choose one of {', '.join(names())}, or make its package "
+                          f"known (an entry point in the group {ENTRY_POINT_GROUP!r}, or its module in "
+                          f"{PLUGINS_ENV})")
+    return _RECORDS[arch]
 
 
-def _lookup(table: dict[str, type], arch: str, what: str) -> type:
-    if arch not in table:
-        _discover(arch)
-    if arch not in table:
-        known = ", ".join(sorted(set(_CONFIG_CLASSES) | set(_MODEL_CLASSES)))
-        raise ConfigError(f"unknown architecture {arch!r} (no {what} registered); choose one of {known}, or import "
-                          f"the package that provides it (installed packages declare it under the entry-point "
-                          f"group {ENTRY_POINT_GROUP!r})")
-    return table[arch]
+def records() -> tuple[Architecture, ...]:
+    """Every architecture's record, the plugins loaded first, in registration order."""
+    load_plugins()
+    return tuple(_RECORDS.values())
+
+
+def names(where: Callable[[Architecture], bool] | None = None) -> tuple[str, ...]:
+    """The names of the architectures (those whose record satisfies ``where``), in registration order."""
+    return tuple(r.name for r in records() if where is None or where(r))
+
+
+def registered() -> tuple[str, ...]:
+    """The architecture names registered so far, without loading plugins."""
+    return tuple(_RECORDS)
 
 
 def config_class(arch: str) -> type | None:
-    """The config class registered for ``arch`` (None for a name that no package provides)."""
+    """The config class of ``arch`` (None for a name that nothing provides)."""
     try:
-        return _lookup(_CONFIG_CLASSES, arch, "config class")
+        return architecture(arch).get("config_class")
     except ConfigError:
         return None
 
 
 def model_class(arch: str) -> type:
-    """The model class registered for ``arch``; :class:`ConfigError` listing the known ones otherwise."""
-    return _lookup(_MODEL_CLASSES, arch, "model class")
-
-
-def registered() -> tuple[str, ...]:
-    """The architecture names registered so far."""
-    return tuple(sorted(set(_CONFIG_CLASSES) | set(_MODEL_CLASSES)))
+    """The model class of ``arch``; :class:`ConfigError` listing the known ones otherwise."""
+    return architecture(arch).get("model_class")

@@ -103,8 +103,7 @@ class ModelConfig:
     linear_order: int = 0
 
     def __post_init__(self) -> None:
-        if self.arch not in ARCHS:
-            raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
+        self._check_arch()
         for name in ("n_u", "n_y", "hidden", "kernel_size", "init_window", "encoder_hidden", "members"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -118,7 +117,7 @@ class ModelConfig:
         if self.arch == "tcn" and self.kernel_size < 2:
             raise ShapeError(f"a TCN needs kernel_size >= 2, got {self.kernel_size}")
         if self.layers is None:
-            object.__setattr__(self, "layers", _DEFAULT_LAYERS[self.arch])
+            object.__setattr__(self, "layers", self._default_layers())
         if not isinstance(self.layers, int) or self.layers < 1:
             raise ShapeError(f"ModelConfig.layers must be a positive integer, got {self.layers!r}")
         object.__setattr__(self, "window", self._resolve_window())
@@ -135,7 +134,18 @@ class ModelConfig:
             raise ConfigError(f"activation {self.activation!r} is not available for arch {self.arch!r}; "
                               f"choose one of {', '.join(valid_act)}")
 
+    # ---- what a subclass of another architecture overrides (a plugin's config, docs/design.md) -------------
+    def _check_arch(self) -> None:
+        """Raise ConfigError unless ``arch`` is one this class describes (here: the five networks)."""
+        if self.arch not in ARCHS:
+            raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
+
+    def _default_layers(self) -> int:
+        """``layers`` when left out."""
+        return _DEFAULT_LAYERS[self.arch]
+
     def _resolve_window(self) -> int:
+        """The window ``L`` (samples seen per step) from the given ``window`` (None: the default)."""
         w = self.window
         if w is not None and (not isinstance(w, int) or isinstance(w, bool) or w < 1):
             raise ShapeError(f"ModelConfig.window must be a positive integer, got {w!r}")
@@ -166,11 +176,11 @@ class ModelConfig:
     def from_dict(cls, d: Mapping) -> "ModelConfig":
         """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`.
 
-        An architecture registered by another package (:mod:`nnfmu.models.architectures`, e.g.
-        ``arch="hybrid"``: :class:`nnfmu.hybrid.HybridConfig`) is rebuilt by its own config class.
+        An architecture registered by another package (:mod:`nnfmu.models.architectures`: the hybrid,
+        a plugin) is rebuilt by its own config class.
         """
         if cls is ModelConfig and isinstance(d, Mapping) and d.get("arch") not in ARCHS:
-            other = architectures.config_class(d.get("arch"))
+            other = architectures.config_class(str(d.get("arch")))
             if other is not None and other is not cls:
                 return other.from_dict(d)
         check_options(d, {f.name for f in dataclasses.fields(cls)}, cls.__name__)
@@ -185,6 +195,3 @@ class ModelConfig:
             changes.setdefault("window", None if self.arch != "mlp" or "arch" in changes else self.window)
         return dataclasses.replace(self, **changes)
 
-
-for _arch in ARCHS:
-    architectures.register_architecture(_arch, config_class=ModelConfig)

@@ -23,16 +23,16 @@ from torch import nn
 from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import ARCHS, ModelConfig
+from nnfmu.models.config import ModelConfig
 from nnfmu.models.linear_path import LinearPathStepModel
 
 
 def single_model_class(config: ModelConfig) -> type:
     """The class of one network of ``config``: the architecture's own, or on a linear path (``linear_order > 0``)."""
     if getattr(config, "linear_order", 0):
-        if config.arch not in ARCHS:
-            raise ShapeError(f"a linear path wraps the networks of nnfmu.models, not {config.arch!r}; "
-                             "set linear_order=0")
+        if not architectures.architecture(config.arch).linear_path:
+            raise ShapeError(f"a {config.arch} model cannot sit on a linear path (its record says "
+                             "linear_path=False); set linear_order=0")
         return LinearPathStepModel
     return architectures.model_class(config.arch)
 

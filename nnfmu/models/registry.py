@@ -1,7 +1,7 @@
 """``build_model``: a fresh network of the architecture a :class:`ModelConfig` names.
 
-The five networks are registered here; packages built on :mod:`nnfmu.models` register
-their own architectures (:mod:`nnfmu.models.architectures`), e.g. ``nnfmu.hybrid``.
+The model class comes from the architecture's record (:mod:`nnfmu.models.architectures`): the five
+networks' (:mod:`nnfmu.models.builtin`), or those other packages register (``nnfmu.hybrid``, plugins).
 """
 
 from __future__ import annotations
@@ -9,17 +9,9 @@ from __future__ import annotations
 from typing import Mapping
 
 from nnfmu.errors import ShapeError
-from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.config import ModelConfig
 from nnfmu.models.ensemble import EnsembleStepModel, single_model_class
-from nnfmu.models.mlp import MLPStepModel
-from nnfmu.models.recurrent import RecurrentStepModel
-from nnfmu.models.tcn import TCNStepModel
-
-for _arch, _cls in (("mlp", MLPStepModel), ("rnn", RecurrentStepModel), ("lstm", RecurrentStepModel),
-                    ("gru", RecurrentStepModel), ("tcn", TCNStepModel)):
-    architectures.register_architecture(_arch, model_class=_cls)
 
 
 def build_model(config: ModelConfig | Mapping, meta: Mapping | None = None, norm=None) -> StepModel:

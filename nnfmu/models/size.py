@@ -10,6 +10,7 @@ import torch
 
 from nnfmu.errors import ConfigError
 from nnfmu.limits import MAX_PARAMETERS
+from nnfmu.models import architectures
 from nnfmu.models.registry import build_model
 
 __all__ = ["count_parameters", "check_network_size"]
@@ -18,8 +19,9 @@ __all__ = ["count_parameters", "check_network_size"]
 def count_parameters(model_config, meta: dict | None = None) -> int:
     """Trainable parameters of the network ``model_config`` describes, counted without allocating them."""
     config = model_config
-    if getattr(config, "arch", None) == "hybrid":  # the compiled physics backend would compile C first
-        config = config.replace(physics_backend="sx")
+    counting = architectures.architecture(config.arch).get("counting_config")
+    if counting is not None:  # e.g. a model that would compile C while it is built
+        config = counting(config)
     with torch.device("meta"):
         model = build_model(config, meta)
     return sum(p.numel() for p in model.parameters() if p.requires_grad)

@@ -11,7 +11,9 @@ operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`:
     ys = rollout(un, yn0)                    # (B, T, n_u), (B, n_y) -> (B, T, n_y), as model.rollout_normalised
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
-It applies to a :class:`RecurrentStepModel`, and to a
+It applies to a model whose architecture's record names the cell of ``rollout.c`` that computes its step
+(``Architecture.rollout_cell``: the RNN, LSTM and GRU) and that is exactly the record's model class (the
+layout of :class:`~nnfmu.models.RecurrentStepModel`), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
 the CPU in float32 or float64, with no active dropout or feedback noise (eval mode, or both zero),
@@ -34,13 +36,13 @@ from pathlib import Path
 import torch
 
 from nnfmu.errors import FmuBuildError, SimulationError
+from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.models.recurrent import RecurrentStepModel
 
 _SOURCE = Path(__file__).with_name("rollout.c")
 _FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
-_CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}
+_CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}  # rollout.c's cells; an 'rnn' by its activation
 _REALS = {torch.float32: "float", torch.float64: "double"}
 _FIXED = ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d")  # the linear path's fixed model, in rollout.c's order
 ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
@@ -49,7 +51,8 @@ ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
 def compiled_rollout(model: StepModel):
     """``rollout(un, yn0) -> ys`` by the compiled free run, or None where it does not apply.
 
-    Applies to a :class:`RecurrentStepModel`, or a :class:`LinearPathStepModel` on one, whose weights
+    Applies to a model whose record names a ``rollout_cell`` (module docstring), or a
+    :class:`LinearPathStepModel` on one, whose weights
     (and buffers of the path) are CPU float32/float64 tensors, without an init window or increment mode,
     and whose dropout and feedback noise are inactive (eval mode, or zero); None otherwise, and None with a
     one-time RuntimeWarning when the library cannot be compiled.
@@ -88,8 +91,9 @@ def _applies(model: StepModel) -> bool:
     if os.environ.get(ENV_SWITCH, "1") == "0":
         return False
     net = model.net if type(model) is LinearPathStepModel else model
-    if type(net) is not RecurrentStepModel:
-        return False
+    record = architectures.architecture(net.config.arch)
+    if record.rollout_cell is None or type(net) is not record.get("model_class"):
+        return False  # a subclass may compute something else than rollout.c
     if any(c.init_window > 1 or c.increment for c in (model.config, net.config)):
         return False  # the encoder's initial state and the increment readout are torch's only
     dtype = net.readout.weight.dtype
@@ -99,12 +103,12 @@ def _applies(model: StepModel) -> bool:
     return not (model.training and (net.config.dropout > 0 or model.feedback_noise))
 
 
-def _cell(model: RecurrentStepModel) -> int:
-    arch = model.config.arch
-    return _CELLS[f"rnn_{model.config.activation}" if arch == "rnn" else arch]
+def _cell(model: StepModel) -> int:
+    cell = architectures.architecture(model.config.arch).rollout_cell
+    return _CELLS[f"rnn_{model.config.activation}" if cell == "rnn" else cell]
 
 
-def _weights(model: RecurrentStepModel) -> list[torch.Tensor]:
+def _weights(model: StepModel) -> list[torch.Tensor]:
     out = []
     for m in model.rnn_layers:
         out += [m.weight_ih_l0, m.weight_hh_l0, m.bias_ih_l0, m.bias_hh_l0]
@@ -123,7 +127,7 @@ def _pointers(tensors) -> ctypes.Array:
     return (ctypes.c_void_p * len(tensors))(*(t.data_ptr() for t in tensors))
 
 
-def _header(model: RecurrentStepModel, B: int, T: int) -> tuple:
+def _header(model: StepModel, B: int, T: int) -> tuple:
     c = model.config
     return (_cell(model), B, T, c.n_u, c.n_y, c.hidden, c.layers, int(c.skip), float(c.skip_scale))
 
@@ -146,7 +150,7 @@ class _Rollout(torch.autograd.Function):
         keep = any(ctx.needs_input_grad[3:])
         shape = (T, c.layers, B, c.hidden)
         hs = un_t.new_empty(shape) if keep else None
-        cs = un_t.new_empty(shape) if keep and c.arch == "lstm" else None
+        cs = un_t.new_empty(shape) if keep and _cell(model) == _CELLS["lstm"] else None
         width = library.nnfmu_rollout_saved_width(_cell(model), c.hidden)
         saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None

@@ -30,6 +30,7 @@ import torch
 from nnfmu.data import Dataset
 from nnfmu.errors import CheckpointError, ConfigError
 from nnfmu.metrics import NrmseResult
+from nnfmu.models import architectures
 from nnfmu.models.base import StepModel, torch_threads
 from nnfmu.models.checkpoint import load_checkpoint, model_from_checkpoint
 from nnfmu.models.config import ModelConfig
@@ -268,9 +269,10 @@ def _test_scores(model: StepModel, dataset: Dataset) -> tuple[NrmseResult | None
 
 
 def _check_device(model: StepModel, device: torch.device) -> None:
-    if device.type != "cpu" and getattr(model.config, "physics_backend", None) == "compiled":
-        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
-                          "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
+    """Its architecture's own check (``Architecture.check_device``: the hybrid's compiled physics is CPU only)."""
+    check = architectures.architecture(model.config.arch).get("check_device")
+    if check is not None:
+        check(model.config, device)
 
 
 def _as_train_config(train_config) -> TrainConfig:
