@@ -30,7 +30,7 @@ ACCEPTED = {
     ("train", "--dropout"): {"0"}, ("train", "--weight-decay"): {"0"}, ("train", "--clip"): {"0", HUGE[float]},
     ("train", "--feedback-noise"): {"0"}, ("train", "--patience"): {"0", HUGE[int]},
     ("tune", "--patience"): {"0", HUGE[int]}, ("tune", "--gpus-per-trial"): {"0"},
-    ("evaluate", "--trajectory"): {"0"}, ("evaluate", "--horizon"): {HUGE[int]},
+    ("evaluate", "--trajectory"): {"0"}, ("evaluate", "--horizon"): {HUGE[int]}, ("generate", "--noise"): {"0"},
 }
 #: Work that a command starts once its arguments are accepted; each is replaced by WorkStarted.
 WORK = ["nnfmu.training.train", "nnfmu.training.train_seeds", "nnfmu.linear.identify_linear",
@@ -170,7 +170,8 @@ INPUTS = {"data": "data", "checkpoint": "ckpt", "fmus": "fmu", "path": "data", "
           "valid": "csv2", "physics_params": None, "linear_path": None}
 OUTPUTS = {"out", "json", "plots", "save", "storage"}
 TEXT = {"target_isa", "platforms", "name", "address", "device", "grid", "size", "inputs", "outputs", "units", "time",
-        "Ts_column", "fs_column", "test_columns", "valid_columns", "train_physics", "data_dir", "increment"}
+        "Ts_column", "fs_column", "test_columns", "valid_columns", "train_physics", "data_dir", "increment",
+        "system"}  # system: a physics spec (a built-in name, file.py:NAME or a .json; tests/test_user_physics_cli.py)
 #: Commands whose outputs are checked when written, not before the work starts (their writers keep the contract
 #: at write time; tests/test_cli_contract.py writes through them for real).
 LATE_OUTPUT_CHECK = {"demo", "generate", "import"}

@@ -129,7 +129,7 @@ def test_arm_record_starts_at_rest_and_its_torques_produce_its_angles(arm_small)
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["generate", "pump", "--out", "D"], "invalid choice: 'pump'"),
+    (["generate", "pump", "--out", "D"], "unknown physics model 'pump'; choose one of arm, slider, valve"),
     (["generate", "valve", "--size", "huge", "--out", "D"],
      "unknown size 'huge' for the valve; valid sizes are paper, small"),
     (["generate", "arm", "--size", "paper", "--out", "D"], "valid sizes are benchmark, small"),

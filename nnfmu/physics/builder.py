@@ -165,9 +165,12 @@ class ModelBuilder:
                                  f"{len(names)} states ({', '.join(names)}); give one per state, in that order")
             by_state = {n: xdot[i] for i, n in enumerate(names)}
         unknown, missing = sorted(set(by_state) - set(names)), [n for n in names if n not in by_state]
-        if unknown or missing:
-            raise ShapeError(f"{self.name}: the ODE names {', '.join(unknown) or 'no unknown state'} and misses "
-                             f"{', '.join(missing) or 'none'}; the states are {', '.join(names)}")
+        if unknown:
+            raise ShapeError(f"{self.name}: the ODE names {', '.join(unknown)}, which are not states; the states are "
+                             f"{', '.join(names)}")
+        if missing:
+            raise ShapeError(f"{self.name}: the ODE has no derivative for {', '.join(missing)}; give one for every "
+                             f"state ({', '.join(names)})")
         for n, e in by_state.items():
             if ca.SX(e).shape != (1, 1):
                 raise ShapeError(f"{self.name}: the derivative of {n} is not a scalar")

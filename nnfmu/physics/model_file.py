@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.util
 import inspect
 import json
 import sys
 import traceback
+import types
 from pathlib import Path
 
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, NnfmuError
@@ -68,11 +68,11 @@ def load_module(path: str | Path):
         raise DataFileError(f"model file {path} not found; check the path (path/to/file.py:NAME)")
     digest = hashlib.sha1(str(path).encode()).hexdigest()[:12]
     name = f"nnfmu_user_model_{digest}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
+    module = types.ModuleType(name)
+    module.__file__ = str(path)
     sys.modules[name] = module  # dataclasses and pickling look their module up here
-    try:
-        spec.loader.exec_module(module)
+    try:  # compiled here rather than imported: no __pycache__ is written beside the user's file
+        exec(compile(path.read_bytes(), str(path), "exec"), module.__dict__)
     except (Exception, SystemExit) as exc:
         sys.modules.pop(name, None)
         if isinstance(exc, SyntaxError):
