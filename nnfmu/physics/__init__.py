@@ -8,8 +8,10 @@
 - :func:`arm_system` / :class:`ArmParams`: the KUKA KR300 arm (RNEA in :mod:`nnfmu.physics.arm_dynamics`).
 - :func:`slider_system` / :class:`SliderParams`: a mass on a rail with friction (an integrating plant).
 - :func:`rk4_step`, :func:`rk4_function`: the fixed-step RK4 used everywhere.
-- :func:`generate_dataset`: simulated datasets (``nnfmu generate``).
-- :func:`resolve_physics` / :func:`register_physics`: the models by name (:mod:`nnfmu.physics.registry`);
+- :func:`generate_dataset`: simulated datasets (``nnfmu generate``); :func:`generate_model_dataset` for any
+  model (a user's own) with the toolkit's excitation signals.
+- :func:`resolve_physics` / :func:`register_physics`: the models by name (:mod:`nnfmu.physics.registry`),
+  by model file (``path/to/file.py:NAME``, which runs that file; :func:`models_in_file`) or JSON document;
   :func:`system_to_document`: a model as JSON with its CasADi Functions serialized.
 """
 
@@ -20,6 +22,8 @@ from nnfmu.physics.builder import ModelBuilder, check_system
 from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.document import system_from_document, system_to_document
 from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
+from nnfmu.physics.generate_model import generate_model_dataset
+from nnfmu.physics.model_file import models_in_file
 from nnfmu.physics.rk4 import rk4_function, rk4_step
 from nnfmu.physics.slider import SliderParams, slider_system
 from nnfmu.physics.valve import ValveParams, valve_system
@@ -28,6 +32,8 @@ from nnfmu.physics.registry import PhysicsEntry, physics_entry, physics_names, r
 __all__ = [
     "ModelBuilder",
     "check_system",
+    "generate_model_dataset",
+    "models_in_file",
     "PhysicsEntry",
     "physics_entry",
     "physics_names",
