@@ -79,7 +79,7 @@ def test_exported_fmu_validates_and_equals_load_model_simulate(trained, valve_sm
     (["--physics", "valve", "--physics-params", "missing.json"], "physics parameter file missing.json not found"),
     (["--physics", "valve", "--physics-params", "broken.json"], "is not valid JSON"),
     (["--physics", "valve", "--physics-params", "unknown.json"], "unknown valve parameter(s) 'stiffness'"),
-    ([], "--arch hybrid needs --physics valve or --physics arm"),
+    ([], "--arch hybrid needs --physics NAME|FILE.py:NAME"),
 ])
 def test_bad_hybrid_options_are_one_clear_line(folders, tmp_path, capsys, monkeypatch, extra, message):
     data, _, _ = folders
@@ -100,14 +100,22 @@ def test_hybrid_options_need_the_hybrid_arch(folders, tmp_path, capsys):
     assert "--physics only apply to --arch hybrid" in capsys.readouterr().err
 
 
-def test_an_unknown_physics_is_refused_by_the_parser(folders, capsys):
+def test_an_unknown_physics_is_one_clear_line(folders, tmp_path, capsys):
+    argv = ["train", "--data", str(folders[0]), "--arch", "hybrid", "--physics", "pendulum", "--out",
+            str(tmp_path / "x.pt")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "'pendulum'" in err and "valve" in err and "Traceback" not in err
+
+
+def test_the_command_line_choices_are_the_packages(capsys):
+    from nnfmu.hybrid import BACKENDS, CORRECTIONS
+    from nnfmu.models.architectures import architecture
+    from nnfmu.physics import physics_names
+
+    choices = {o.field: o.choices for o in architecture("hybrid").options}
+    assert (choices["correction"], choices["physics_backend"]) == (CORRECTIONS, BACKENDS)
     with pytest.raises(SystemExit):
-        main(["train", "--data", str(folders[0]), "--arch", "hybrid", "--physics", "pendulum", "--out", "x.pt"])
-    assert "invalid choice: 'pendulum'" in capsys.readouterr().err
-
-
-def test_the_command_line_choices_are_the_packages():
-    from nnfmu.cli import train as cli
-    from nnfmu.hybrid import BACKENDS, CORRECTIONS, PHYSICS
-
-    assert cli._HYBRID_CHOICES == {"physics": tuple(PHYSICS), "correction": CORRECTIONS, "physics_backend": BACKENDS}
+        main(["train", "--help"])
+    physics_help = " ".join(capsys.readouterr().out.split()).partition("--physics NAME|FILE.py:NAME")[2]
+    assert f"({', '.join(physics_names())}) or FILE.py:NAME" in physics_help

@@ -1,6 +1,7 @@
 """``nnfmu train`` at its defaults: the linear path and the training choices made from the data.
 
-Without ``--linear-path off`` (and without ``--increment``) every network starts on a linear path
+For an architecture whose record asks for it (``Architecture.data_plan``: the networks, not the hybrid):
+without ``--linear-path off`` (and without ``--increment``) every network starts on a linear path
 (:mod:`nnfmu.models.linear_path`): the linear baseline is identified on the training split first, and
 the network learns a correction to it, starting from zero. The windows, batch, budget and validation
 tail the user left out are chosen from the data (:mod:`nnfmu.training.plan`); the choices are printed.
@@ -13,10 +14,11 @@ import time
 
 def prepare(args, ds, model_config, train_config, given: dict):
     """``(dataset with its validation split, model_config, train_config, linear model or None)`` for a new run."""
+    from nnfmu.models import architectures
     from nnfmu.training.plan import plan_training, valid_fraction, validation_line
     from nnfmu.training.trainer import prepare_dataset
 
-    if model_config.arch == "hybrid":
+    if not architectures.architecture(model_config.arch).data_plan:
         return ds, model_config, train_config, None
     init_window = model_config.init_window
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
@@ -38,8 +40,9 @@ def prepare(args, ds, model_config, train_config, given: dict):
 def _linear_start(args, ds, model_config):
     """The identified linear model the network starts from, or None (``--linear-path off``, increment mode)."""
     from nnfmu.linear import LinearConfig, identify_linear, load_linear
+    from nnfmu.models import architectures
 
-    if args.linear_path == "off":
+    if args.linear_path == "off" or not architectures.architecture(model_config.arch).linear_path:
         return None
     if args.increment is not None or model_config.increment:
         print("plan: no linear path (increment mode carries the output from step to step; --linear-path off)")

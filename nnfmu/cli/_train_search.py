@@ -1,7 +1,8 @@
 """``nnfmu train --max-minutes N`` (without ``--epochs``, ``--patience``, ``--seeds``, ``--resume``, ``--increment``):
 the budget spent on a small early-stopping search (:mod:`nnfmu.study.time_search`), reported in one table.
 
-The search applies to networks (not ``--arch hybrid``); ``--arch`` is then optional and searched when left out.
+The search applies to architectures whose record plans from the data (``Architecture.data_plan``: the networks,
+not the hybrid); ``--arch`` is then optional, and when left out the architectures with a ``search_rank`` are searched.
 Every model or training option given stays fixed in every trial.
 """
 
@@ -15,13 +16,19 @@ _FIXING = ("arch", "hidden", "layers", "window", "dropout", "init_window", "lr",
 
 
 def applies(args: argparse.Namespace) -> bool:
-    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a network, in a new run, with Ray installed.
+    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a planned architecture, in a new run, with Ray.
 
     Without Ray (the optional extra ``tune``) one network trains for the budget, as before, after a note.
     """
     wanted = (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
-              and args.seeds is None and not args.resume and args.increment is None and args.arch != "hybrid")
+              and args.seeds is None and not args.resume and args.increment is None and _planned(args.arch))
     return wanted and _ray_installed()
+
+
+def _planned(arch: str | None) -> bool:
+    from nnfmu.models import architectures
+
+    return arch is None or architectures.architecture(arch).data_plan
 
 
 _noted: list = []

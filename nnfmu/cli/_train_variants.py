@@ -47,13 +47,16 @@ def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out
     from nnfmu.errors import ConfigError
     from nnfmu.models import load_checkpoint
 
-    if args.resume or model_config.arch == "hybrid":
-        raise ConfigError("--increment auto trains two networks into new files: drop --resume (and --arch hybrid)")
+    if args.resume:
+        raise ConfigError("--increment auto trains two networks into new files: drop --resume")
+    try:  # both before the first training: an architecture without increment mode (the hybrid) fails here
+        configs = {mode: model_config.replace(increment=mode == "increment") for mode in ("residual", "increment")}
+    except ConfigError as exc:
+        raise ConfigError(f"--increment auto: {exc}") from exc
     scores = {}
-    for mode in ("residual", "increment"):
+    for mode, config in configs.items():
         part = out.with_name(f"{out.stem}.{mode}.pt")
         print(f"--- {mode} output mode -> {part}")
-        config = model_config.replace(increment=mode == "increment")
         status = (run_seeds(args, ds, config, train_config, part, device) if args.seeds is not None
                   else run_one(args, ds, config, train_config, part, device))
         if status != 0:

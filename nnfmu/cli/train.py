@@ -8,15 +8,18 @@ stops and keeps the best checkpoint (exit status 130, or 143 for SIGTERM);
 finishes leaves nothing at ``--out``; sizes are checked against
 :mod:`nnfmu.limits` before anything is allocated.
 
-``--arch hybrid --physics valve|arm [--physics-params FILE.json] [--train-physics NAME,...]``
-trains a physics model plus a neural correction (:mod:`nnfmu.hybrid`): parallel strategy only,
-in float64; ``--hidden``, ``--layers`` and ``--dropout`` shape the correction network.
+``--arch`` offers every registered architecture (:mod:`nnfmu.models.architectures`, :mod:`nnfmu.cli._arch`):
+the five networks, the hybrid (``--arch hybrid --physics NAME [--physics-params FILE.json]``: a physics
+model plus a neural correction, :mod:`nnfmu.hybrid`) and those of plugins (an installed package's
+``nnfmu.architectures`` entry point, or a module named in ``NNFMU_PLUGINS``). An architecture's own options
+come from its record, and so do its strategies and training dtype.
 """
 
 from __future__ import annotations
 
 import argparse
 
+from nnfmu.cli import _arch
 from nnfmu.cli._resources import add_resource_options, check_resource_options
 from nnfmu.cli._train_plan import prepare as prepare_defaults
 from nnfmu.cli._train_plan import report_end
@@ -77,30 +80,15 @@ _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosi
             "valid_horizon": ("auto", "split", "joined")}
 
 
-# (option, HybridConfig field, type, help): only with --arch hybrid.
-_HYBRID_OPTIONS = (
-    ("--physics", "physics", str, "physics model of a hybrid: valve or arm (required with --arch hybrid)"),
-    ("--physics-params", "physics_params", str,
-     "JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} (default: nominal)"),
-    ("--train-physics", "train_physics", str,
-     "comma-separated physical parameters trained with the network, in log-space (default: none)"),
-    ("--correction", "correction", str,
-     "where the network corrects the physics: derivative (inside every RK4 stage, default) or step (after it)"),
-    ("--n-sub", "n_sub", int, "RK4 sub-steps per sample (default: the physics' own)"),
-    ("--physics-backend", "physics_backend", str,
-     "how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler needed)"),
-)
-_HYBRID_CHOICES = {"physics": ("valve", "arm"), "correction": ("derivative", "step"),
-                   "physics_backend": ("compiled", "sx")}
-_HYBRID_METAVARS = {"physics_params": "FILE.json", "train_physics": "NAME,...", "n_sub": "N"}
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train a network (parallel or series-parallel) on a dataset folder",
                        description=_DESCRIPTION)
     p.add_argument("--data", required=True, help="dataset folder (meta.json, train.npz, test.npz[, valid.npz])")
-    p.add_argument("--arch", choices=["mlp", "rnn", "lstm", "gru", "tcn", "hybrid"],
-                   help="network architecture, or hybrid (physics + neural correction; see --physics)")
+    p.add_argument("--arch", choices=_arch.LazyChoices(_architecture_names), metavar="ARCH",
+                   help="the architecture: %(choices)s (an architecture's own options are listed under its name "
+                        "below; plugins: the modules named in $NNFMU_PLUGINS, and installed packages' entry points "
+                        "'nnfmu.architectures')")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"],
                    help="parallel (free-run loss, default) or series-parallel (one-step-ahead loss)")
     p.add_argument("-o", "--out", required=True, help="checkpoint file to write (.pt)")
@@ -126,10 +114,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU), "
                             "or the best on validation (default ensemble)")
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
-    hybrid = p.add_argument_group("hybrid models (--arch hybrid)")
-    for flag, dest, typ, text in _HYBRID_OPTIONS:
-        hybrid.add_argument(flag, dest=dest, type=typ, default=None, choices=_HYBRID_CHOICES.get(dest),
-                            metavar=_HYBRID_METAVARS.get(dest), help=text)
+    _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -137,11 +122,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_run)
 
 
+def _architecture_names() -> tuple[str, ...]:
+    from nnfmu.models import architectures
+
+    return architectures.names()
+
+
+def _record(arch: str):
+    from nnfmu.models import architectures
+
+    return architectures.architecture(arch)
+
+
 def _given(args: argparse.Namespace, options) -> dict:
     return {dest: getattr(args, dest) for _, dest, _, _ in options if getattr(args, dest) is not None}
 
 
-def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
+def _train_config(args: argparse.Namespace, stored: dict | None, record):
     from nnfmu.errors import ConfigError
     from nnfmu.training import TrainConfig
 
@@ -152,23 +149,11 @@ def _train_config(args: argparse.Namespace, stored: dict | None, hybrid: bool):
         changes.update(epochs=UNBOUNDED_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
         changes["strategy"] = args.strategy
-    if hybrid and changes.get("strategy", "parallel") != "parallel":
-        raise ConfigError("a hybrid model trains in parallel mode only (its state is the full physics state, which "
-                          "measured outputs cannot overwrite); drop --strategy or pass --strategy parallel")
-    base = TrainConfig.from_dict(stored) if stored else TrainConfig(dtype="float64" if hybrid else "float32")
+    if changes.get("strategy", record.strategies[0]) not in record.strategies:
+        raise ConfigError(f"a {record.name} model trains in {' or '.join(record.strategies)} mode only; drop "
+                          f"--strategy or pass --strategy {record.strategies[0]}")
+    base = TrainConfig.from_dict(stored) if stored else TrainConfig(strategy=record.strategies[0], dtype=record.dtype)
     return base.replace(**changes)
-
-
-def _hybrid_given(args: argparse.Namespace) -> dict:
-    """The hybrid options given on the command line, as HybridConfig fields (the parameter file read)."""
-    from nnfmu.hybrid import load_physics_params
-
-    given = _given(args, _HYBRID_OPTIONS)
-    if "physics_params" in given:
-        given["physics_params"] = load_physics_params(given["physics_params"])
-    if "train_physics" in given:
-        given["train_physics"] = tuple(n.strip() for n in given["train_physics"].split(",") if n.strip())
-    return given
 
 
 def _model_config(args: argparse.Namespace, ds, stored: dict | None):
@@ -178,13 +163,9 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     given = _given(args, _MODEL_OPTIONS)
     if args.increment == "on":
         given["increment"] = True
-    arch = args.arch or (stored or {}).get("arch")
-    hybrid_given = _given(args, _HYBRID_OPTIONS)
-    if hybrid_given and arch != "hybrid":
-        flags = [flag for flag, dest, _, _ in _HYBRID_OPTIONS if dest in hybrid_given]
-        raise ConfigError(f"{', '.join(flags)} only apply to --arch hybrid; drop them or train a hybrid")
-    if arch == "hybrid":
-        given.update(_hybrid_given(args))
+    arch = args.arch or (stored or {}).get("arch") or "gru"  # no --arch: searched, starting from the GRU
+    record = _record(arch)
+    given.update(_arch.given(args, record))  # the architecture's own options (its record's)
     if stored is not None:
         config = ModelConfig.from_dict(stored)
         clash = {k: v for k, v in given.items() if _differs(config, k, v)}
@@ -195,22 +176,17 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
                               "Drop them, or train into a new --out file")
         return config
     if args.arch is None and not search_applies(args):
-        raise ConfigError("--arch is required (mlp, rnn, lstm, gru, tcn or hybrid) unless --resume or "
+        raise ConfigError(f"--arch is required ({', '.join(_architecture_names())}) unless --resume or "
                           "--max-minutes alone (a search over the architectures too) is given")
-    if arch == "hybrid":
-        from nnfmu.hybrid import HybridConfig
-
-        if "physics" not in given:
-            raise ConfigError("--arch hybrid needs --physics valve or --physics arm (the physics model to correct)")
-        return HybridConfig(n_u=ds.n_u, n_y=ds.n_y, **given)
-    return ModelConfig(arch=args.arch or "gru", n_u=ds.n_u, n_y=ds.n_y, **given)  # no --arch: searched
+    _arch.check_required(record, given)
+    return record.get("config_class")(arch=arch, n_u=ds.n_u, n_y=ds.n_y, **given)
 
 
 def _differs(config, key: str, value) -> bool:
-    """Whether a given option differs from the stored config (hybrid options compared after normalising)."""
+    """Whether a given option differs from the stored config (an architecture's own compared after normalising)."""
     from nnfmu.errors import NnfmuError
 
-    if key not in {dest for _, dest, _, _ in _HYBRID_OPTIONS}:
+    if key not in {o.field for o in _record(config.arch).options}:
         return getattr(config, key) != value
     try:
         return getattr(config.replace(**{key: value}), key) != getattr(config, key)
@@ -239,8 +215,8 @@ def _run(args: argparse.Namespace) -> int:
     if stored is None and out.exists() and not args.force:
         raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")
     model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
-    hybrid = model_config.arch == "hybrid"
-    train_config = _train_config(args, None if stored is None else stored.get("train_config"), hybrid)
+    record = _record(model_config.arch)
+    train_config = _train_config(args, None if stored is None else stored.get("train_config"), record)
     check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")

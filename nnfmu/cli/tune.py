@@ -15,6 +15,7 @@ import argparse
 import contextlib
 from pathlib import Path
 
+from nnfmu.cli._arch import LazyChoices
 from nnfmu.cli._resources import add_device_option
 from nnfmu.cli._text import description
 
@@ -27,8 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tune", help="grid-search an architecture's hyperparameters on Ray Tune (extra 'tune')",
                        description=description(__doc__))
     p.add_argument("--data", required=True, help="dataset folder")
-    p.add_argument("--arch", required=True, choices=["mlp", "rnn", "lstm", "gru", "tcn"],
-                   help="the network architecture whose hyperparameters are searched")
+    p.add_argument("--arch", required=True, choices=LazyChoices(_tunable_names), metavar="ARCH",
+                   help="the architecture whose hyperparameters are searched: %(choices)s (every registered one "
+                        "whose config the hyperparameters make alone; plugins: $NNFMU_PLUGINS, entry points)")
     p.add_argument("--strategy", choices=["parallel", "series-parallel"], default="parallel",
                    help="training strategy of every trial (default parallel)")
     p.add_argument("--address", help="address of a running Ray cluster (default: start a local instance)")
@@ -70,6 +72,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                       "the local Ray instance this machine's GPU N alone; with --address, Ray picks each trial's GPU "
                       "and cuda:N is refused)")
     p.set_defaults(func=_run)
+
+
+def _tunable_names() -> tuple[str, ...]:
+    from nnfmu.cli._arch import tunable
+    from nnfmu.models import architectures
+
+    return architectures.names(tunable)
 
 
 def parse_grid(items: list[str]) -> dict[str, tuple]:
@@ -162,6 +171,7 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import check_writable
     from nnfmu.data import load_dataset
     from nnfmu.study import TuneSettings, get_budget, require_ray, tune_architecture
+    from nnfmu.study.presets import preset_for
 
     require_ray()  # before loading data: a missing extra is the first thing to say
     check_writable(args.out, args.storage and Path(args.storage) / "x")  # before any trial runs
@@ -170,6 +180,7 @@ def _run(args: argparse.Namespace) -> int:
     ds = load_dataset(args.data)
     budget = get_budget(_system(args, ds), args.budget)
     grid = parse_grid(args.grid) if args.grid else budget.grid(args.arch)
+    base = budget.hyper.get(args.arch) or preset_for(args.arch)  # an architecture the budget has no preset for
     settings = TuneSettings(epochs=args.epochs or budget.tune_epochs,
                             patience=budget.tune_patience if args.patience is None else args.patience,
                             max_minutes=args.max_minutes or budget.tune_max_minutes, samples=args.samples,
@@ -177,7 +188,7 @@ def _run(args: argparse.Namespace) -> int:
                             grace_epochs=args.grace_epochs, cpus_per_trial=cpus_per_trial,
                             gpus_per_trial=args.gpus_per_trial, device=device)
     with _quiet_output() if args.quiet else contextlib.nullcontext():
-        result = tune_architecture(ds, args.arch, strategy=args.strategy, base=budget.hyper[args.arch], grid=grid,
+        result = tune_architecture(ds, args.arch, strategy=args.strategy, base=base, grid=grid,
                                    settings=settings, address=args.address, num_cpus=args.cpus,
                                    storage=args.storage, progress=not args.quiet)
     how = f"{args.search} search, {args.scheduler} scheduler"

@@ -112,6 +112,9 @@ class Architecture:
         Options of ``nnfmu train`` that only this architecture takes (its own config fields).
     grid : mapping field -> values
         The architecture's own part of the paper-size tune grid (e.g. ``{"layers": (1, 2)}``).
+    preset : mapping field -> value
+        The hyperparameters (:class:`nnfmu.study.Hyper` fields) that ``nnfmu tune`` starts from where the study's
+        tables (:mod:`nnfmu.study.presets`) have none for it (the defaults of its config otherwise).
     search_rank : int, optional
         Place in the architectures that ``nnfmu train --max-minutes`` searches (lowest first); None: not searched.
     data_plan, linear_path : bool
@@ -138,6 +141,7 @@ class Architecture:
     rollout_cell: str | None = None
     options: tuple[Option, ...] = ()
     grid: Mapping[str, tuple] = field(default_factory=dict)
+    preset: Mapping[str, Any] = field(default_factory=dict)
     search_rank: int | None = None
     data_plan: bool = True
     linear_path: bool = True
@@ -155,6 +159,7 @@ class Architecture:
             raise ConfigError(f"architecture {self.name!r}: give to_casadi and casadi_model together")
         object.__setattr__(self, "options", tuple(self.options))
         object.__setattr__(self, "grid", MappingProxyType({k: tuple(v) for k, v in dict(self.grid).items()}))
+        object.__setattr__(self, "preset", MappingProxyType(dict(self.preset)))
 
     def get(self, attribute: str):
         """The record's ``attribute`` with a lazy reference resolved (None stays None)."""

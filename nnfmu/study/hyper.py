@@ -1,53 +1,47 @@
-"""``Hyper``: the searched or preset hyperparameters of one architecture (a network and its training)."""
+"""``Hyper``: the searched or preset hyperparameters of one architecture (a network and its training).
+
+Its fields and defaults are those of :class:`~nnfmu.models.ModelConfig` and
+:class:`~nnfmu.training.TrainConfig`, read from them, less the ones a single run sets rather than a
+recipe (:data:`RUN_MODEL_FIELDS`, :data:`RUN_TRAIN_FIELDS`), so a field added to a config is a
+hyperparameter without an edit here (once ``valid_horizon`` was lost in a copied list).
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+import typing
 from typing import Mapping
 
 from nnfmu.errors import check_options
-from nnfmu.models import ARCHS, ModelConfig
+from nnfmu.models import ARCHS, ModelConfig, architectures
 from nnfmu.training import TrainConfig
 
-_MODEL_FIELDS = ("hidden", "layers", "window", "kernel_size", "dropout", "increment", "init_window")
-_TRAIN_FIELDS = ("lr", "weight_decay", "clip", "batch_size", "truncate", "feedback_noise", "average",
-                 "average_decay", "lr_schedule", "join")
+#: ModelConfig fields a run sets: the architecture and the system's sizes, the seeds (members), the data plan.
+RUN_MODEL_FIELDS = ("arch", "n_u", "n_y", "members", "linear_order")
+#: TrainConfig fields a run sets: its strategy, length, seed, dtype and validation split.
+RUN_TRAIN_FIELDS = ("strategy", "epochs", "patience", "seed", "max_minutes", "dtype", "valid_fraction")
 
 
-@dataclass(frozen=True, kw_only=True)
-class Hyper:
-    """Hyperparameters of one architecture: the searched or preset part of a network and its training.
+def _fields(cls: type, run: tuple[str, ...]) -> list[tuple[str, object, dataclasses.Field]]:
+    hints = typing.get_type_hints(cls)
+    return [(f.name, hints[f.name], dataclasses.field(default=f.default) if f.default is not dataclasses.MISSING
+             else dataclasses.field(default_factory=f.default_factory))
+            for f in dataclasses.fields(cls) if f.name not in run]
 
-    Attributes
-    ----------
-    hidden, layers, window, kernel_size, dropout, increment, init_window :
-        As in :class:`nnfmu.models.ModelConfig` (``layers``/``window`` None: the architecture's default).
-    lr, weight_decay, clip, batch_size, truncate, feedback_noise, average, average_decay, lr_schedule, join :
-        As in :class:`nnfmu.training.TrainConfig`.
-    """
 
-    hidden: int = 32
-    layers: int | None = None
-    window: int | None = None
-    kernel_size: int = 3
-    dropout: float = 0.0
-    increment: bool = False
-    init_window: int = 1
-    lr: float = 3e-3
-    weight_decay: float = 1e-4
-    clip: float = 1.0
-    batch_size: int = 64
-    truncate: int | None = None
-    feedback_noise: float = 0.0
-    average: str = "none"
-    average_decay: float = 0.999
-    lr_schedule: str = "constant"
-    join: bool = False
+_MODEL_FIELDS = tuple(name for name, _, _ in _fields(ModelConfig, RUN_MODEL_FIELDS))
+_TRAIN_FIELDS = tuple(name for name, _, _ in _fields(TrainConfig, RUN_TRAIN_FIELDS))
 
+
+class _HyperMethods:
     def model_config(self, arch: str, n_u: int, n_y: int) -> ModelConfig:
-        """The :class:`ModelConfig` of ``arch`` for a system with ``n_u`` inputs and ``n_y`` outputs."""
-        return ModelConfig(arch=arch, n_u=n_u, n_y=n_y, **{k: getattr(self, k) for k in _MODEL_FIELDS})
+        """The config of ``arch`` (its record's config class) for a system with ``n_u`` inputs and ``n_y`` outputs.
+
+        Fields that class does not have (another architecture's config) are left out.
+        """
+        cls = architectures.architecture(arch).get("config_class")
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(arch=arch, n_u=n_u, n_y=n_y, **{k: getattr(self, k) for k in _MODEL_FIELDS if k in known})
 
     def train_config(self, *, strategy: str, epochs: int, patience: int, seed: int,
                      max_minutes: float | None) -> TrainConfig:
@@ -66,6 +60,21 @@ class Hyper:
     def from_dict(cls, d: Mapping) -> "Hyper":
         check_options(d, {f.name for f in dataclasses.fields(cls)}, "Hyper")
         return cls(**dict(d))
+
+
+Hyper = dataclasses.make_dataclass(
+    "Hyper", _fields(ModelConfig, RUN_MODEL_FIELDS) + _fields(TrainConfig, RUN_TRAIN_FIELDS),
+    bases=(_HyperMethods,), frozen=True, kw_only=True)
+Hyper.__module__ = __name__  # for pickling (Ray ships it to its workers)
+Hyper.__doc__ = f"""Hyperparameters of one architecture: the searched or preset part of a network and its training.
+
+Attributes
+----------
+{', '.join(_MODEL_FIELDS)} :
+    As in :class:`nnfmu.models.ModelConfig` (``layers``/``window`` None: the architecture's default).
+{', '.join(_TRAIN_FIELDS)} :
+    As in :class:`nnfmu.training.TrainConfig`.
+"""
 
 
 def per_arch(**hyper: Hyper) -> dict[str, Hyper]:

@@ -1,12 +1,15 @@
 """The preset hyperparameters of every system, with the measurements that chose them (validation only).
 
-:mod:`nnfmu.study.budgets` assembles them into budgets. The figures quoted are free-run NRMSE,
+:mod:`nnfmu.study.budgets` assembles them into budgets. The tables cover the paper's five networks; the
+per-architecture parts of the grids (the depths) and the start of an architecture no table covers
+(:func:`preset_for`, ``nnfmu tune --arch PLUGIN``) come from the architectures' records
+(:mod:`nnfmu.models.architectures`). The figures quoted are free-run NRMSE,
 validation / test, seed 0 unless said otherwise; the test split was never used to choose.
 """
 
 from __future__ import annotations
 
-from nnfmu.models import ARCHS
+from nnfmu.models import ARCHS, architectures
 from nnfmu.study.hyper import Hyper, per_arch
 
 # Tiny networks for the smoke runs: every architecture, a few hundred weights.
@@ -79,5 +82,10 @@ def quick_grid() -> dict:
 
 
 def paper_grid() -> dict:
-    depth = {"mlp": (2, 3), "rnn": (1, 2), "lstm": (1, 2), "gru": (1, 2), "tcn": (3, 4)}
-    return {a: {"hidden": (16, 32, 64), "layers": depth[a], "lr": (1e-3, 3e-3)} for a in ARCHS}
+    """Width and learning rate, and each architecture's own part (its record's ``grid``: the depths)."""
+    return {a: {"hidden": (16, 32, 64), **architectures.architecture(a).grid, "lr": (1e-3, 3e-3)} for a in ARCHS}
+
+
+def preset_for(arch: str) -> Hyper:
+    """Where a search of ``arch`` starts when no table here covers it: its record's ``preset``."""
+    return Hyper(**architectures.architecture(arch).preset)

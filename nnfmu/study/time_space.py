@@ -4,7 +4,8 @@ The knobs that matter on data nobody tuned for (issue 21): the architecture, the
 (``--truncate``), the learning rate and the feedback noise. Every knob the user gave stays as given; the others
 take these values:
 
-- ``arch``: gru, lstm, tcn, mlp, rnn (the given ``model_config.arch`` first);
+- ``arch``: the architectures whose record has a ``search_rank``, in its order (gru, lstm, tcn, mlp, rnn, then
+  plugins that ask for it; :func:`arch_order`), the given ``model_config.arch`` first;
 - ``hidden``: 16, 32, 64; ``lr``: 1e-3, 3e-3, 1e-2; ``feedback_noise``: 0, 0.1 (output standard deviations);
 - ``truncate``: the planned window times 0.5, 1 and 2, when the plan trains on windows (else whole trajectories).
 
@@ -20,10 +21,8 @@ import math
 import numpy as np
 
 from nnfmu.errors import NnfmuError
-from nnfmu.models import ModelConfig
+from nnfmu.models import ModelConfig, architectures
 from nnfmu.training import TrainConfig
-
-ARCH_ORDER = ("gru", "lstm", "tcn", "mlp", "rnn")
 HIDDEN = (16, 32, 64)
 LRS = (1e-3, 3e-3, 1e-2)
 NOISES = (0.0, 0.1)
@@ -33,6 +32,12 @@ KNOBS = ("arch", "hidden", "lr", "feedback_noise", "truncate")
 MODEL_OPTIONS = ("hidden", "layers", "window", "dropout", "init_window")
 
 
+def arch_order() -> tuple[str, ...]:
+    """The searched architectures: those whose record has a ``search_rank``, lowest first."""
+    ranked = [r for r in architectures.records() if r.search_rank is not None]
+    return tuple(r.name for r in sorted(ranked, key=lambda r: r.search_rank))
+
+
 def axes(model_config: ModelConfig, train_config: TrainConfig, given, longest: int) -> dict:
     """Knob -> the values it takes (one value: fixed). ``longest``: samples of the longest training record."""
     arch = model_config.arch
@@ -40,7 +45,7 @@ def axes(model_config: ModelConfig, train_config: TrainConfig, given, longest: i
     windows = (truncate,)
     if truncate is not None and "truncate" not in given:
         windows = tuple(sorted({w for f in TRUNCATE_FACTORS if 2 <= (w := int(round(f * truncate))) <= longest}))
-    return {"arch": (arch,) if "arch" in given else (arch,) + tuple(a for a in ARCH_ORDER if a != arch),
+    return {"arch": (arch,) if "arch" in given else (arch,) + tuple(a for a in arch_order() if a != arch),
             "hidden": (model_config.hidden,) if "hidden" in given else HIDDEN,
             "lr": (train_config.lr,) if "lr" in given else LRS,
             "feedback_noise": (train_config.feedback_noise,) if "feedback_noise" in given else NOISES,
@@ -88,8 +93,9 @@ def _model(model_config: ModelConfig, arch: str, given) -> ModelConfig:
     if arch == model_config.arch:
         return model_config
     kept = {k: getattr(model_config, k) for k in MODEL_OPTIONS if k in given}
-    return ModelConfig(arch=arch, n_u=model_config.n_u, n_y=model_config.n_y, increment=model_config.increment,
-                       linear_order=model_config.linear_order, **kept)
+    config_class = architectures.architecture(arch).get("config_class")
+    return config_class(arch=arch, n_u=model_config.n_u, n_y=model_config.n_y, increment=model_config.increment,
+                        linear_order=model_config.linear_order, **kept)
 
 
 def _builds(model_config: ModelConfig, arch: str, given) -> bool:

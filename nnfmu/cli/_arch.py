@@ -1,0 +1,101 @@
+"""The architectures on the command line: ``--arch`` choices and each architecture's own options, from the records.
+
+``nnfmu train`` and ``nnfmu tune`` offer every registered architecture (:mod:`nnfmu.models.architectures`):
+the five networks, the hybrid, and those of plugins (installed packages with an ``nnfmu.architectures``
+entry point, or modules named in ``NNFMU_PLUGINS``). Names are listed lazily (:class:`LazyChoices`), so
+that building the parser imports neither torch nor CasADi; the records themselves are plain data.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Callable, Iterable
+
+from nnfmu.errors import ConfigError
+from nnfmu.models import architectures
+from nnfmu.models.architectures import Architecture, Option
+
+_TYPES = {"str": str, "int": int, "float": float}
+
+
+class LazyChoices:
+    """argparse ``choices`` computed on first use (checking a value, formatting help or an error).
+
+    ``open_choices``: every value passes (the config checks it); the names are only listed in the help.
+    """
+
+    def __init__(self, names: Callable[[], Iterable[str]], *, open_choices: bool = False):
+        self._names, self._open, self._cache = names, open_choices, None
+
+    def _list(self) -> tuple[str, ...]:
+        if self._cache is None:
+            self._cache = tuple(self._names())
+        return self._cache
+
+    def __contains__(self, value) -> bool:
+        return self._open or value in self._list()
+
+    def __iter__(self):
+        return iter(self._list())
+
+    def __len__(self) -> int:
+        return len(self._list())
+
+
+def option_choices(option: Option):
+    """The argparse ``choices`` of an architecture's option (lazy when the record names a function)."""
+    if option.choices is None or isinstance(option.choices, tuple):
+        return option.choices
+    return LazyChoices(lambda: tuple(architectures.resolve(option.choices)()), open_choices=option.open_choices)
+
+
+def add_architecture_options(p: argparse.ArgumentParser) -> dict[str, list[Option]]:
+    """One argument group per architecture with options of its own; returns ``{field: [options]}`` added."""
+    added: dict[str, Option] = {}
+    for record in architectures.records():
+        group = None
+        for option in record.options:
+            if option.flag in added:
+                if added[option.flag].field != option.field:
+                    raise ConfigError(f"architecture {record.name!r} registers {option.flag} for its field "
+                                      f"{option.field!r}, but another architecture takes it for "
+                                      f"{added[option.flag].field!r}; rename one of the options")
+                continue
+            group = group or p.add_argument_group(f"--arch {record.name}: {record.summary}")
+            group.add_argument(option.flag, dest=option.field, type=_TYPES[option.type], default=None,
+                               choices=option_choices(option), metavar=option.metavar, help=option.help)
+            added[option.flag] = option
+    return {o.field: o for o in added.values()}
+
+
+def given(args: argparse.Namespace, record: Architecture) -> dict:
+    """The options of architectures given on the command line, as ``record``'s config fields (parsed).
+
+    Options of other architectures are an error that names them.
+    """
+    own = {o.field: o for o in record.options}
+    foreign = [o for r in architectures.records() if r.name != record.name for o in r.options
+               if o.field not in own and getattr(args, o.field, None) is not None]
+    if foreign:
+        owners = sorted({r.name for r in architectures.records() for o in r.options if o in foreign})
+        raise ConfigError(f"{', '.join(dict.fromkeys(o.flag for o in foreign))} only apply to "
+                          f"--arch {' or '.join(owners)}; drop them or train that architecture")
+    out = {}
+    for field, option in own.items():
+        value = getattr(args, field, None)
+        if value is not None:
+            out[field] = value if option.parse is None else architectures.resolve(option.parse)(value)
+    return out
+
+
+def check_required(record: Architecture, given_fields) -> None:
+    """ConfigError naming the first required option of ``record`` that was not given."""
+    for option in record.options:
+        if option.required and option.field not in given_fields:
+            raise ConfigError(f"--arch {record.name} needs {option.flag} {option.metavar or option.field.upper()} "
+                              f"({option.help.split(':')[0]})")
+
+
+def tunable(record: Architecture) -> bool:
+    """Whether ``nnfmu tune`` can build its configs from hyperparameters alone (no required option)."""
+    return not any(o.required for o in record.options)
