@@ -1,0 +1,297 @@
+"""Hybrids on any physics model: the registered slider, a user's model file outside the repository, a fit result.
+
+- with its correction zero, a hybrid is exactly its physics (``PhysicsSystem.simulate_states``), in torch with
+  either physics backend and in its FMU; on a grey-box fit result that is the fitted model;
+- a hybrid on ``FILE.py:NAME`` trains jointly with the model's free parameters, and its checkpoint holds the
+  physics as a document: after the file is deleted it loads, scores and exports to an FMU that fmpy validates,
+  that simulates as co-simulation and Model Exchange, and whose directional derivatives are finite differences;
+- an ODE that blows up in training stops it with a message and never leaves non-finite weights behind.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+from fmpy.validation import validate_fmu
+from test_fmu_model_exchange import MeInstance
+
+from nnfmu.cli import main
+from nnfmu.cosim import FmuSimulator
+from nnfmu.data import Channel, Dataset, Trajectories, save_dataset
+from nnfmu.errors import ShapeError, TrainingError
+from nnfmu.export import build_fmu, casadi_model
+from nnfmu.hybrid import HybridConfig, HybridStepModel
+from nnfmu.models import build_model, load_checkpoint, load_model
+from nnfmu.physics import PhysicsSystem, resolve_physics, slider_system
+from nnfmu.physics.document import system_to_document
+from nnfmu.training import TrainConfig, train
+from nnfmu.training.evaluate import score
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+# A user's model file, written with plain CasADi: the slider with viscous friction only (the built-in slider
+# also has Coulomb and Stribeck friction, which the data below have); the same with quadratic friction under
+# the same model name; and a model that blows up in finite time (xdot = a x^2 + u).
+MODEL_FILE = '''
+import casadi as ca
+from nnfmu.physics import PhysicsSystem
+from nnfmu.system import Variable
+
+
+def _system(name, friction, parameters):
+    x, u, p = ca.SX.sym("x", 2), ca.SX.sym("u", 1), ca.SX.sym("p", 2)
+    ode = ca.Function("ode", [x, u, p], [ca.vertcat(x[1], (u[0] - friction(x[1], p[1])) / p[0])],
+                      ["x", "u", "p"], ["xdot"])
+    output = ca.Function("output", [x, p], [x[0]], ["x", "p"], ["y"])
+    y0 = ca.SX.sym("y0", 1)
+    init = ca.Function("init", [y0, u, p], [ca.vertcat(y0[0], 0)], ["y0", "u0", "p"], ["x0"])
+    return PhysicsSystem(name=name, Ts=0.01, n_sub=2, ode=ode, output=output, init_state=init,
+                         states=(Variable("pos", "m"), Variable("v", "m/s")),
+                         inputs=(Variable("F", "N", "force", min=-6.0, max=6.0),),
+                         outputs=(Variable("pos", "m"),), parameters=parameters, state_scales=(0.5, 1.0))
+
+
+def viscous_slider():
+    return _system("viscous_slider", lambda v, d: d * v,
+                   (Variable("m", "kg", "mass", 1.0, min=0.2, max=1.2), Variable("d", "N.s/m", "friction", 2.0)))
+
+
+def quadratic_slider():
+    return _system("viscous_slider", lambda v, d: d * v * ca.fabs(v),
+                   (Variable("m", "kg", "mass", 1.0), Variable("d", "N.s2/m2", "friction", 2.0)))
+
+
+def exploding():
+    x, u, p = ca.SX.sym("x", 1), ca.SX.sym("u", 1), ca.SX.sym("p", 1)
+    ode = ca.Function("ode", [x, u, p], [p[0] * x[0] ** 2 + u[0]], ["x", "u", "p"], ["xdot"])
+    output = ca.Function("output", [x, p], [x], ["x", "p"], ["y"])
+    y0 = ca.SX.sym("y0", 1)
+    init = ca.Function("init", [y0, u, p], [y0], ["y0", "u0", "p"], ["x0"])
+    return PhysicsSystem(name="exploding", Ts=0.01, n_sub=1, ode=ode, output=output, init_state=init,
+                         states=(Variable("pos", "m"),), inputs=(Variable("F", "N"),), outputs=(Variable("pos", "m"),),
+                         parameters=(Variable("a", "1/(m.s)", "growth", 1e4),))
+'''
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("user_model") / "my_slider.py"  # pytest's temporary folder: outside the repo
+    path.write_text(MODEL_FILE)
+    return path
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    """The built-in slider (Stribeck friction) under piecewise-constant forces: 6 x 120 train, 2 valid, 1 test."""
+    truth, rng = slider_system(), np.random.default_rng(0)
+
+    def split(n_traj: int, n: int = 120) -> Trajectories:
+        us, ys = [], []
+        for _ in range(n_traj):
+            u = np.repeat(rng.uniform(-6.0, 6.0, size=(n // 10 + 1, 1)), 10, axis=0)[:n]
+            us.append(u)
+            ys.append(truth.simulate_states(np.array([rng.uniform(-0.1, 0.1), 0.0]), u[:-1])[:, :1])
+        return Trajectories(tuple(us), tuple(ys))
+
+    ds = Dataset(Ts=0.01, inputs=(Channel("F", "N"),), outputs=(Channel("pos", "m"),),
+                 splits={"train": split(6), "valid": split(2), "test": split(1)})
+    return ds, save_dataset(ds, tmp_path_factory.mktemp("slider_data") / "slider")
+
+
+def physics_run(system: PhysicsSystem, u: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    """Outputs (N, n_y) of the physics' own RK4 free run from ``init_state(y0, u[0])``."""
+    p = system.parameter_values()
+    x0 = np.asarray(system.init_state(y0, u[0], p)).ravel()
+    xs = system.simulate_states(x0, u[:-1])
+    return np.stack([np.asarray(system.output(x, p)).ravel() for x in xs])
+
+
+def _relative(got: np.ndarray, want: np.ndarray) -> float:
+    return float(np.max(np.abs(got - want)) / np.ptp(want))
+
+
+def fitted(system: PhysicsSystem, **values) -> PhysicsSystem:
+    """``system`` with the given nominal parameter values: what a grey-box fit writes."""
+    parameters = tuple(dataclasses.replace(v, start=values.get(v.name, v.start)) for v in system.parameters)
+    return dataclasses.replace(system, parameters=parameters)
+
+
+@pytest.fixture(scope="module")
+def fit_file(model_file):
+    path = model_file.parent / "fit.json"
+    system = fitted(resolve_physics(f"{model_file}:viscous_slider"), m=0.8, d=2.6)
+    path.write_text(json.dumps({"format": "nnfmu-greybox-fit/1", "physics": system_to_document(system), "fit": {}}))
+    return path
+
+
+@pytest.mark.parametrize("backend", ["compiled", "sx"])
+@pytest.mark.parametrize("which", ["slider", "viscous", "quadratic", "fit"])
+def test_a_zero_correction_is_exactly_the_physics(which, backend, model_file, fit_file, data):
+    # the user's systems themselves, two ODEs under one name: each hybrid must run its own (not a cached other)
+    spec = {"slider": "slider", "viscous": resolve_physics(f"{model_file}:viscous_slider"), "fit": str(fit_file),
+            "quadratic": resolve_physics(f"{model_file}:quadratic_slider")}[which]
+    ds, _ = data
+    model = build_model(HybridConfig(n_u=1, n_y=1, physics=spec, hidden=8, physics_backend=backend), ds.meta(),
+                        norm=ds.norm_stats("train")).double()
+    if which == "fit":  # the fit's values are the hybrid's starting point, and what it trains by default
+        assert model.physics_parameter_values() == {"m": 0.8, "d": 2.6}
+        assert model.config.train_physics == ("m", "d")
+    u, y = ds.test.u[0], ds.test.y[0]
+    want = physics_run(resolve_physics(spec), u, y[0])
+    assert np.ptp(want) > 0.05
+    assert _relative(model.simulate(u, y[0]), want) < 1e-13
+
+
+def test_defaults_come_from_the_registry_or_cover_every_state(model_file):
+    slider = HybridConfig(n_u=1, n_y=1, physics="slider")
+    assert (slider.corrected_states, slider.correction_time, slider.train_physics) == (("v",), 0.1, ())
+    assert "physics_document" not in slider.to_dict()  # a registered model's checkpoint stays as it was
+    user = HybridConfig(n_u=1, n_y=1, physics=f"{model_file}:viscous_slider")
+    assert (user.corrected_states, user.correction_time, user.train_physics) == (("pos", "v"), 0.1, ("m", "d"))
+    assert HybridConfig.from_dict(json.loads(json.dumps(user.to_dict()))) == user
+    with pytest.raises(ShapeError, match="has n_u = 1, got 2"):
+        HybridConfig(n_u=2, n_y=1, physics=f"{model_file}:viscous_slider")
+
+
+def test_trained_parameters_stay_within_their_bounds(model_file):
+    model = HybridStepModel(HybridConfig(n_u=1, n_y=1, physics=f"{model_file}:viscous_slider"))
+    with torch.no_grad():
+        model.physics_log_scale.fill_(1.0)  # m * exp(10) and d * exp(10): m has max 1.2, d no bound
+    values = model.physics_parameter_values()
+    assert values["m"] == 1.2 and values["d"] == pytest.approx(2.0 * np.exp(10.0))
+
+
+@pytest.fixture(scope="module")
+def trained(model_file, data, tmp_path_factory):
+    """A hybrid on the user's file trained for 2 epochs; the model file is deleted afterwards."""
+    folder = tmp_path_factory.mktemp("user_hybrid")
+    own = folder / "slider_model.py"
+    own.write_text(model_file.read_text())
+    config = HybridConfig(n_u=1, n_y=1, physics=f"{own}:viscous_slider", hidden=8)
+    result = train(data[0], config, TrainConfig(epochs=2, truncate=40, batch_size=3, dtype="float64", patience=0),
+                   out=folder / "hybrid.pt")
+    own.unlink()
+    return result, folder / "hybrid.pt"
+
+
+def test_the_correction_trains_jointly_with_the_free_parameters(trained):
+    result, _ = trained
+    assert result.best_epoch > 0 and result.best_valid_nrmse < result.history[0]["valid_nrmse"]
+    values = result.model.physics_parameter_values()
+    assert values["m"] != 1.0 and values["d"] != 2.0
+
+
+def test_the_checkpoint_loads_and_scores_without_the_model_file(trained, data):
+    result, path = trained
+    config = load_checkpoint(path)["model_config"]  # weights_only: the physics is a JSON document, no Python
+    assert config["physics_document"]["format"] == "nnfmu-physics/1"
+    model = load_model(path)
+    same = copy.deepcopy(result.model).float()  # load_model builds float32 weights, as for every network
+    u, y = data[0].test.u[0], data[0].test.y[0]
+    np.testing.assert_array_equal(model.simulate(u, y[0]), same.simulate(u, y[0]))
+    assert score(model, data[0].test) == score(same, data[0].test) < 10
+
+
+@pytest.fixture(scope="module")
+def trained_fmu(trained):
+    _, path = trained
+    fmu = path.with_suffix(".fmu")
+    assert main(["export", str(path), "-o", str(fmu), "--fmi-version", "3"]) == 0  # the model file is gone
+    return fmu
+
+
+def test_the_fmu_validates_and_co_simulates_as_the_model(trained, trained_fmu, data, tmp_path, capsys):
+    assert validate_fmu(str(trained_fmu)) == []
+    ds, folder = data
+    model = load_model(trained[1])
+    u, y = np.concatenate(ds.test.u + ds.valid.u), ds.test.y[0]
+    with FmuSimulator(trained_fmu, ds.input_names, ds.output_names, ds.Ts) as sim:
+        got = sim.simulate(u, y[0])
+    assert _relative(got, model.simulate(u, y[0])) < 1e-10
+    assert main(["evaluate", str(trained_fmu), "--data", str(folder), "--json", str(tmp_path / "s.json")]) == 0
+    scores = json.loads((tmp_path / "s.json").read_text())
+    assert np.isfinite(json.dumps(scores).count("nrmse"))
+
+
+def test_model_exchange_integrates_and_its_jacobian_is_finite_differences(trained_fmu):
+    me = MeInstance(trained_fmu, {"pos_start": 0.05})
+    me.set({"F": 2.0})
+    x = me.states_now() + np.array([0.01, 0.3])
+    me.set_states(x)
+    unknowns, knowns = [f"der({s})" for s in me.states] + ["pos"], [*me.states, "F"]
+    jacobian = me.jacobian(unknowns, knowns)
+    point = np.concatenate([x, [2.0]])
+
+    def unknowns_at(z):
+        me.set_states(z[:2])
+        me.set({"F": z[2]})
+        return me.get(unknowns)
+
+    fd = np.zeros_like(jacobian)
+    for j in range(point.size):
+        h = 1e-6 * max(abs(point[j]), 1e-3)
+        plus, minus = point.copy(), point.copy()
+        plus[j] += h
+        minus[j] -= h
+        fd[:, j] = (unknowns_at(plus) - unknowns_at(minus)) / (2 * h)
+    np.testing.assert_array_less(np.abs(jacobian - fd) / np.abs(jacobian).max(axis=1, keepdims=True), 1e-6)
+    assert np.count_nonzero(jacobian) >= 4
+    me.fmu.terminate()
+    me.fmu.freeInstance()
+
+
+def test_model_exchange_follows_co_simulation(trained_fmu, data):
+    import fmpy
+
+    ds, _ = data
+    u, y0 = ds.test.u[0][:60], ds.test.y[0][0]
+    t = np.arange(len(u)) * ds.Ts
+    steps = [(t[k], u[k - 1, 0]) for k in range(1, len(u)) if u[k, 0] != u[k - 1, 0]]  # held: a step, no ramp
+    signal = np.array(sorted(steps + list(zip(t, u[:, 0])), key=lambda row: row[0]),
+                      dtype=[("time", float), ("F", float)])
+    runs = {}
+    for kind, options in (("CoSimulation", {}), ("ModelExchange", {"solver": "CVode", "relative_tolerance": 1e-10})):
+        result = fmpy.simulate_fmu(str(trained_fmu), fmi_type=kind, stop_time=t[-1], output_interval=ds.Ts,
+                                   input=signal, start_values={"pos_start": float(y0[0])}, **options)
+        rows = [np.flatnonzero(np.abs(result["time"] - t_k) < 1e-6 * ds.Ts)[-1] for t_k in t]  # not the events'
+        runs[kind] = result["pos"][rows]
+    assert np.ptp(runs["CoSimulation"]) > 0.01
+    # CVode integrates the hybrid's ODE; co-simulation is its RK4 (2 sub-steps of 5 ms): RK4's error (measured 1.6e-8)
+    assert _relative(runs["ModelExchange"], runs["CoSimulation"]) < 1e-6
+
+
+def test_the_fmu_of_a_zero_correction_is_exactly_the_physics(model_file, data, tmp_path):
+    ds, _ = data
+    spec = f"{model_file}:viscous_slider"
+    model = build_model(HybridConfig(n_u=1, n_y=1, physics=spec, hidden=4), ds.meta(), norm=ds.norm_stats("train"))
+    fmu = build_fmu(casadi_model(model.double()), tmp_path / "zero.fmu", fmi_version=2)
+    u, y = ds.test.u[0], ds.test.y[0]
+    with FmuSimulator(fmu, ds.input_names, ds.output_names, ds.Ts) as sim:
+        got = sim.simulate(u, y[0])
+    assert _relative(got, physics_run(resolve_physics(spec), u, y[0])) < 1e-12
+
+
+def test_an_ode_that_blows_up_stops_training_and_keeps_finite_weights(model_file, data, tmp_path):
+    config = HybridConfig(n_u=1, n_y=1, physics=f"{model_file}:exploding", hidden=4)
+    out = tmp_path / "exploding.pt"
+    with pytest.raises(TrainingError, match="loss became (nan|inf).*best weights so far are kept"):
+        train(data[0], config, TrainConfig(epochs=2, truncate=20, batch_size=3, dtype="float64"), out=out)
+
+    def tensors(value):
+        if isinstance(value, torch.Tensor):
+            yield value
+        elif isinstance(value, dict):
+            for v in value.values():
+                yield from tensors(v)
+        elif isinstance(value, (list, tuple)):
+            for v in value:
+                yield from tensors(v)
+
+    ckpt = load_checkpoint(out)
+    weights = list(tensors(ckpt))
+    assert weights and all(torch.isfinite(t).all() for t in weights if t.is_floating_point())
