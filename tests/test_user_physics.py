@@ -167,7 +167,7 @@ def test_generated_data_stay_in_the_input_ranges_are_seeded_and_noisy_on_request
     assert u.min() >= -1.0 and u.max() <= 1.0 and np.ptp(u) > 1.5  # the whole range, never beyond
     first = clean.train
     np.testing.assert_array_equal(first.y[0], system.model().simulate(first.u[0], first.y[0][0]))
-    noisy = generate_model_dataset(system, size="small", seed=3, noise=0.05)
+    noisy = generate_model_dataset(system.source["file"] + ":oscillator", size="small", seed=3, noise=0.05)
     np.testing.assert_array_equal(noisy.train.u[0], first.u[0])
     residual = np.concatenate(noisy.train.y) - np.concatenate(first.y)
     assert residual.std() == pytest.approx(0.05 * np.concatenate(first.y).std(), rel=0.05)
@@ -180,3 +180,20 @@ def test_generated_data_stay_in_the_input_ranges_are_seeded_and_noisy_on_request
     with pytest.raises(ConfigError, match=r"input\(s\) f have no range"):
         generate_model_dataset(open_range.build())
 
+
+
+def test_a_model_without_parameters_has_no_p_port_and_one_without_inputs_is_not_generated():
+    m = ModelBuilder("decay", Ts=0.1)
+    x = m.state("x")
+    f = m.input("f", min=0.0, max=1.0)
+    m.ode(x=f - x)
+    m.output("y", "", "", x)
+    model = m.build().model()
+    assert model.init.name_in() == ["y0", "u0"] and model.step.name_in() == ["x", "u"]
+    assert model.continuous.ode.name_in() == ["x", "u"] and model.spec.parameters == ()
+    free = ModelBuilder("free", Ts=0.1)
+    s = free.state("s")
+    free.ode(s=-s)
+    free.output("s", "", "", s, start=1.0)
+    with pytest.raises(ConfigError, match="free has no inputs"):
+        generate_model_dataset(free.build())

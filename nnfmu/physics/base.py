@@ -181,8 +181,10 @@ class PhysicsSystem:
             True: ``init(y0, u0, p)`` and ``step(x, u, p)`` take the physical
             parameters as a ``p`` port (tunable FMU parameters, ``spec.parameters``).
             False: the nominal values are baked in and the ports are ``(y0, u0)``, ``(x, u)``.
+            A model without parameters has no ``p`` port either way.
         """
         n_sub = self.n_sub if n_sub is None else n_sub
+        expose_parameters = expose_parameters and bool(self.parameters)
         advance = rk4_function(self.ode, Ts=self.Ts, n_sub=n_sub, name=f"{self.name}_rk4")
         sym = ca.SX if advance.is_a("SXFunction") else ca.MX
         x, u = sym.sym("x", self.n_x), sym.sym("u", len(self.inputs))
@@ -204,6 +206,7 @@ class PhysicsSystem:
         ``ode(x, u(, p)) -> xdot`` and ``output(x(, p)) -> y``; ``expose_parameters`` as in :meth:`model`.
         """
         x, u, p_sym = ca.SX.sym("x", self.n_x), ca.SX.sym("u", len(self.inputs)), ca.SX.sym("p", len(self.parameters))
+        expose_parameters = expose_parameters and bool(self.parameters)
         p = p_sym if expose_parameters else ca.DM(self.parameter_values())
         extra, extra_names = ([p_sym], ["p"]) if expose_parameters else ([], [])
         ode = ca.Function("ode", [x, u] + extra, [self.ode(x, u, p)], ["x", "u"] + extra_names, ["xdot"])

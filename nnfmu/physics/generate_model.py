@@ -49,6 +49,9 @@ def model_excitation(system: PhysicsSystem) -> tuple[ExcitationConfig, tuple[Sig
     to ``1.5 / T`` Hz (at most a quarter of the Nyquist frequency), and an input crosses its whole range
     in no less than ``0.2 T``. Raises ConfigError for an input without a finite range.
     """
+    if not system.inputs:
+        raise ConfigError(f"{system.name} has no inputs; generate excites a model through its inputs, so declare "
+                          f"at least one with input(..., min=, max=)")
     open_inputs = [v.name for v in system.inputs if v.min is None or v.max is None or v.min >= v.max]
     if open_inputs:
         raise ConfigError(f"{system.name}: input(s) {', '.join(open_inputs)} have no range to excite within; "
@@ -88,14 +91,15 @@ def _split(system, step, config, limits, n_traj: int, n_steps: int, seed: int, s
     return Trajectories(tuple(us), tuple(ys))
 
 
-def generate_model_dataset(system: PhysicsSystem, *, size: str = "standard", seed: int = 0,
+def generate_model_dataset(system: PhysicsSystem | str, *, size: str = "standard", seed: int = 0,
                            noise: float = 0.0) -> Dataset:
     """Simulate ``system`` at its nominal parameters into train, valid and test splits.
 
     Parameters
     ----------
-    system : PhysicsSystem
-        Any model with a finite ``[min, max]`` on every input.
+    system : PhysicsSystem or str
+        Any model with a finite ``[min, max]`` on every input, or a spec of one
+        (:func:`nnfmu.physics.resolve_physics`: ``"path/to/file.py:NAME"`` runs that file).
     size : str
         ``"standard"`` (40 x 1000 train, 4 x 4000 valid and test) or ``"small"`` (16 x 400, 2 x 1600).
     seed : int
@@ -106,6 +110,9 @@ def generate_model_dataset(system: PhysicsSystem, *, size: str = "standard", see
     """
     if size not in MODEL_SIZES:
         raise ConfigError(f"unknown size {size!r} for a model of your own; valid sizes are {', '.join(MODEL_SIZES)}")
+    from nnfmu.physics.registry import resolve_physics
+
+    system = resolve_physics(system)
     cfg = MODEL_SIZES[size]
     config, limits = model_excitation(system)
     step = rk4_function(system.ode, Ts=system.Ts, n_sub=system.n_sub, name=f"{system.name}_rk4")
