@@ -197,6 +197,13 @@ def test_the_checkpoint_loads_and_scores_without_the_model_file(trained, data):
     assert score(model, data[0].test) == score(same, data[0].test) < 10
 
 
+def test_info_names_the_stored_physics_instead_of_printing_it(trained, capsys):
+    assert main(["info", str(trained[1])]) == 0
+    out = capsys.readouterr().out
+    assert "physics_document viscous_slider (2 states; stored inside)" in " ".join(out.split())
+    assert len(out) < 3000  # not the serialized CasADi functions (about 6000 characters)
+
+
 @pytest.fixture(scope="module")
 def trained_fmu(trained):
     _, path = trained

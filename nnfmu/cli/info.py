@@ -125,8 +125,12 @@ def _checkpoint(path: Path) -> dict:
     summary = dict(ckpt.get("summary") or {})
     summary.update(best_epoch=ckpt.get("best_epoch"), seconds=float(sum(h.get("seconds", 0.0) for h in history)),
                    resumable=ckpt.get("resume") is not None)
+    config = dict(ckpt["model_config"])
+    if isinstance(config.get("physics_document"), dict):  # a hybrid on a user's model: name it, not its bytes
+        doc = config["physics_document"]
+        config["physics_document"] = f"{doc.get('name')} ({len(doc.get('states', []))} states; stored inside)"
     return {"kind": "checkpoint", "path": str(path), "name": meta.get("name"), "Ts": meta.get("Ts"),
-            "model_config": ckpt["model_config"], "train_config": ckpt.get("train_config"),
+            "model_config": config, "train_config": ckpt.get("train_config"),
             "inputs": stats("u", meta.get("inputs", [])), "outputs": stats("y", meta.get("outputs", [])),
             "training": summary, "source": meta.get("source", {})}
 
