@@ -44,8 +44,9 @@ from torch.nn import functional as F
 
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.hybrid.compiled_torch import casadi_to_torch
-from nnfmu.hybrid.config import HybridConfig, document_system, physics_system
+from nnfmu.hybrid.config import HybridConfig
 from nnfmu.hybrid.fused import fused_step, weight_vector
+from nnfmu.hybrid.parameters import document_system, physics_system
 from nnfmu.models.base import StepModel
 from nnfmu.models.mlp import activation_module
 from nnfmu.physics import PhysicsSystem, rk4_step

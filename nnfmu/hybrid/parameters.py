@@ -1,0 +1,114 @@
+"""The physics of a hybrid by name or document, and its parameter overrides (:class:`~nnfmu.hybrid.HybridConfig`).
+
+- :func:`physics_system` (a registered model, built once) and :func:`document_system` (a physics
+  document's JSON text, deserialized once): what :meth:`HybridConfig.system` returns;
+- :func:`normalise_physics_params` and :func:`load_physics_params`: a JSON object of parameter names and
+  numbers (a tuple field may be a list), checked against the physics' ``p`` vector.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+from typing import Mapping
+
+from nnfmu.errors import CheckpointError, ConfigError, DataFileError, UnknownOptionError
+from nnfmu.physics import PhysicsSystem
+from nnfmu.physics.document import system_from_document
+from nnfmu.physics.registry import physics_entry, physics_names
+
+__all__ = ["physics_system", "document_system", "document_text", "registered_defaults",
+           "normalise_physics_params", "load_physics_params"]
+
+
+@functools.lru_cache(maxsize=None)
+def physics_system(name: str) -> PhysicsSystem:
+    """The nominal registered :class:`PhysicsSystem` called ``name`` (built once per process)."""
+    return physics_entry(name).build()
+
+
+@functools.lru_cache(maxsize=8)
+def document_system(text: str) -> PhysicsSystem:
+    """The :class:`PhysicsSystem` of a physics document given as JSON text (built once per document)."""
+    return system_from_document(json.loads(text))
+
+
+def document_text(doc) -> str:
+    """Canonical JSON text of a physics document (a dict, or JSON text): hashable, comparable, stored."""
+    if isinstance(doc, str):
+        try:
+            doc = json.loads(doc)
+        except json.JSONDecodeError as exc:
+            raise CheckpointError(f"the hybrid's stored physics document is not valid JSON ({exc}); "
+                                  "train or export the hybrid again") from exc
+    if not isinstance(doc, Mapping):
+        raise CheckpointError(f"the hybrid's physics document must be a JSON object, got {type(doc).__name__}")
+    return json.dumps(dict(doc), sort_keys=True, separators=(",", ":"))
+
+
+def registered_defaults(system: PhysicsSystem, name: str | None):
+    """The registry's entry whose defaults apply to ``system`` (its own name's, if the states match), or None."""
+    name = system.name if name is None else name
+    if name not in physics_names():
+        return None
+    entry = physics_entry(name)
+    states = {v.name for v in system.states}
+    return entry if set(entry.corrected_states or ()) <= states else None
+
+
+def _number(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"physics parameter {name!r} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def normalise_physics_params(physics: str | PhysicsSystem, params: Mapping,
+                             label: str | None = None) -> tuple[tuple[str, float], ...]:
+    """Check parameter overrides against ``physics``' ``p`` names; sorted ``(name, value)`` pairs.
+
+    ``physics``: a registered name or the system itself (``label`` names it in messages).
+
+    A list value expands a tuple field: ``{"f_vis": [a, ..]}`` -> ``f_vis1 = a, ...``.
+    Raises UnknownOptionError (listing the valid names) or ConfigError (bad value).
+    """
+    if not isinstance(params, Mapping):
+        raise ConfigError(f"physics parameters must be a mapping of name -> number, got {type(params).__name__}")
+    system = physics if isinstance(physics, PhysicsSystem) else physics_system(physics)
+    physics = label or (system.name if isinstance(physics, PhysicsSystem) else physics)
+    valid = [v.name for v in system.parameters]
+    out: dict[str, float] = {}
+    for name, value in params.items():
+        if isinstance(value, (list, tuple)):
+            names = [f"{name}{j + 1}" for j in range(len(value))]
+            if not all(n in valid for n in names) or f"{name}{len(value) + 1}" in valid:
+                raise ConfigError(f"physics parameter {name!r} got a list of {len(value)} values, but {physics} has "
+                                  f"no tuple parameter {name!r} of that length; give scalars by entry name")
+            out.update((n, _number(n, v)) for n, v in zip(names, value))
+        else:
+            out[str(name)] = _number(str(name), value)
+    unknown = sorted(set(out) - set(valid))
+    if unknown:
+        raise UnknownOptionError(f"unknown {physics} parameter(s) {', '.join(map(repr, unknown))}; valid names are: "
+                                 f"{', '.join(valid)}")
+    return tuple(sorted(out.items()))
+
+
+def load_physics_params(path: str | os.PathLike) -> dict:
+    """Read a JSON parameter file (an object of name -> number or list); see the module docstring."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except FileNotFoundError:
+        raise DataFileError(f"physics parameter file {path} not found; pass a JSON file such as "
+                            '{"k_s": 32500.0, "C_max": 4.2e-10}') from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFileError(f"cannot read the physics parameter file {path}: {exc}") from exc
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"physics parameter file {path} is not valid JSON ({exc}); write an object such as "
+                          '{"k_s": 32500.0, "C_max": 4.2e-10}') from exc
+    if not isinstance(data, dict):
+        raise ConfigError(f"physics parameter file {path} must hold a JSON object of name -> number, "
+                          f"got a {type(data).__name__}")
+    return data
