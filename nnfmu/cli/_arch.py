@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 from typing import Callable, Iterable
 
+from nnfmu.cli._checks import RULES, Rule
 from nnfmu.errors import ConfigError
 from nnfmu.models import architectures
 from nnfmu.models.architectures import Architecture, Option
@@ -62,6 +63,10 @@ def add_architecture_options(p: argparse.ArgumentParser) -> dict[str, list[Optio
                                       f"{added[option.flag].field!r}; rename one of the options")
                 continue
             group = group or p.add_argument_group(f"--arch {record.name}: {record.summary}")
+            if option.bounds is not None and option.field not in RULES and ("train", option.field) not in RULES:
+                lo, hi = option.bounds  # checked as every numeric option is (nnfmu.cli._checks)
+                RULES[("train", option.field)] = Rule(lo, hi, lo_open=option.open_bounds[0],
+                                                      hi_open=option.open_bounds[1])
             group.add_argument(option.flag, dest=option.field, type=_TYPES[option.type], default=None,
                                choices=option_choices(option), metavar=option.metavar, help=option.help)
             added[option.flag] = option

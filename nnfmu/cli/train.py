@@ -128,6 +128,12 @@ def _architecture_names() -> tuple[str, ...]:
     return architectures.names()
 
 
+def _first_searched() -> str:
+    from nnfmu.models import architectures
+
+    return architectures.search_order()[0]
+
+
 def _record(arch: str):
     from nnfmu.models import architectures
 
@@ -163,7 +169,7 @@ def _model_config(args: argparse.Namespace, ds, stored: dict | None):
     given = _given(args, _MODEL_OPTIONS)
     if args.increment == "on":
         given["increment"] = True
-    arch = args.arch or (stored or {}).get("arch") or "gru"  # no --arch: searched, starting from the GRU
+    arch = args.arch or (stored or {}).get("arch") or _first_searched()  # no --arch: searched, from the first
     record = _record(arch)
     given.update(_arch.given(args, record))  # the architecture's own options (its record's)
     if stored is not None:

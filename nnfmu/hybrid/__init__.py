@@ -17,8 +17,11 @@ The hybrid is an architecture like the networks: this module registers its recor
 neither torch nor CasADi (``nnfmu --help`` lists the hybrid's options without them).
 """
 
+from typing import TYPE_CHECKING
+
 from nnfmu._lazy import lazy_exports
 from nnfmu.errors import ConfigError
+from nnfmu.limits import MAX_RK4_SUBSTEPS
 from nnfmu.models.architectures import Architecture, Option, register_architecture
 
 _LAZY = {
@@ -40,6 +43,14 @@ _LAZY = {
     "hybrid_to_casadi": "nnfmu.hybrid.export",
     "HybridStepModel": "nnfmu.hybrid.model",
 }
+
+if TYPE_CHECKING:  # what _LAZY imports on first use, for readers and tools (mkdocstrings, type checkers)
+    from nnfmu.hybrid._sx_source import SUPPORTED_OPS
+    from nnfmu.hybrid.casadi_torch import GRADIENT_MODES, TorchFunction, sx_to_torch
+    from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_torch, compiled_to_torch
+    from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, PHYSICS, HybridConfig, load_physics_params, physics_system
+    from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
+    from nnfmu.hybrid.model import HybridStepModel
 
 __all__ = sorted(_LAZY)
 
@@ -86,7 +97,7 @@ register_architecture(Architecture(
         Option(flag="--correction", field="correction", choices=("derivative", "step"),
                help="where the network corrects the physics: derivative (inside every RK4 stage, default) or "
                     "step (after it)"),
-        Option(flag="--n-sub", field="n_sub", type="int", metavar="N",
+        Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
                help="RK4 sub-steps per sample (default: the physics' own)"),
         Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
                help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "

@@ -13,6 +13,8 @@
 The names below are imported on first use, so that the records (and ``nnfmu --help``) need no torch.
 """
 
+from typing import TYPE_CHECKING
+
 from nnfmu._lazy import lazy_exports
 from nnfmu.models import builtin  # noqa: F401  (registers the five networks' records; imports no torch)
 from nnfmu.models.architectures import Architecture, Option, register_architecture
@@ -34,6 +36,17 @@ _LAZY = {
     "model_from_checkpoint": "nnfmu.models.checkpoint",
     "save_checkpoint": "nnfmu.models.checkpoint",
 }
+
+if TYPE_CHECKING:  # what _LAZY imports on first use, for readers and tools (mkdocstrings, type checkers)
+    from nnfmu.models.base import StepModel
+    from nnfmu.models.checkpoint import load_checkpoint, load_model, model_from_checkpoint, save_checkpoint
+    from nnfmu.models.config import ACTIVATIONS, ARCHS, ModelConfig, tcn_receptive_field
+    from nnfmu.models.ensemble import EnsembleStepModel
+    from nnfmu.models.mlp import MLPStepModel
+    from nnfmu.models.recurrent import RecurrentStepModel
+    from nnfmu.models.registry import build_model
+    from nnfmu.models.tcn import TCNStepModel
+    from nnfmu.models.window import WindowStepModel
 
 __all__ = sorted([*_LAZY, "Architecture", "Option", "register_architecture"])
 

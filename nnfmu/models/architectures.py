@@ -39,7 +39,8 @@ from typing import Any, Callable, Mapping
 from nnfmu.errors import ConfigError
 
 __all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "architecture", "config_class",
-           "load_plugins", "model_class", "names", "records", "register_architecture", "registered", "resolve"]
+           "load_plugins", "model_class", "names", "records", "register_architecture", "registered", "resolve",
+           "search_order"]
 
 ENTRY_POINT_GROUP = "nnfmu.architectures"
 PLUGINS_ENV = "NNFMU_PLUGINS"
@@ -69,7 +70,10 @@ class Option:
     returning the names; ``open_choices``: the names are listed in the help but any value passes on to
     the config, which checks it (e.g. a physics model given as ``FILE.py:NAME``). ``parse``: a reference
     to ``str -> value`` applied before the value reaches the config (e.g. reading a file).
-    ``required``: ``nnfmu train --arch NAME`` refuses to start without it.
+    ``required``: ``nnfmu train --arch NAME`` refuses to start without it. ``bounds``: a numeric option's
+    valid range ``(lo, hi)`` (``hi`` None: no upper limit), checked before any work like every numeric
+    option of the command line (:mod:`nnfmu.cli._checks`); ``open_bounds``: whether ``lo`` and ``hi`` are
+    excluded.
     """
 
     flag: str
@@ -81,6 +85,14 @@ class Option:
     metavar: str | None = None
     parse: Ref | None = None
     required: bool = False
+    bounds: tuple[float, float | None] | None = None
+    open_bounds: tuple[bool, bool] = (False, False)
+
+    def __post_init__(self) -> None:
+        if self.type not in ("str", "int", "float"):
+            raise ConfigError(f"option {self.flag}: type must be 'str', 'int' or 'float', got {self.type!r}")
+        if self.type != "str" and self.bounds is None:
+            raise ConfigError(f"option {self.flag}: a numeric option needs its valid range, bounds=(lo, hi)")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,6 +236,12 @@ def records() -> tuple[Architecture, ...]:
 def names(where: Callable[[Architecture], bool] | None = None) -> tuple[str, ...]:
     """The names of the architectures (those whose record satisfies ``where``), in registration order."""
     return tuple(r.name for r in records() if where is None or where(r))
+
+
+def search_order() -> tuple[str, ...]:
+    """The architectures ``nnfmu train --max-minutes`` searches: those with a ``search_rank``, lowest first."""
+    return tuple(r.name for r in sorted((r for r in records() if r.search_rank is not None),
+                                        key=lambda r: r.search_rank))
 
 
 def registered() -> tuple[str, ...]:

@@ -34,8 +34,7 @@ MODEL_OPTIONS = ("hidden", "layers", "window", "dropout", "init_window")
 
 def arch_order() -> tuple[str, ...]:
     """The searched architectures: those whose record has a ``search_rank``, lowest first."""
-    ranked = [r for r in architectures.records() if r.search_rank is not None]
-    return tuple(r.name for r in sorted(ranked, key=lambda r: r.search_rank))
+    return architectures.search_order()
 
 
 def axes(model_config: ModelConfig, train_config: TrainConfig, given, longest: int) -> dict:

@@ -1,0 +1,109 @@
+"""An architecture from outside nnfmu plugs in through its public record alone (issue 22, docs/design.md,
+"How to add an architecture").
+
+The toy (tests/plugins/toy_arch: a leaky recurrent cell on nnfmu's base classes) is registered by its own
+module, loaded through ``NNFMU_PLUGINS``, trained both ways, exported to an FMU that fmpy scores as the
+torch model scores it, and offered by ``nnfmu train --arch`` (with its own option) and ``nnfmu tune --arch``.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nnfmu.models import architectures
+
+PLUGINS = Path(__file__).parent / "plugins"
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture(scope="module")
+def toy():
+    """The toy's record, loaded as a user loads it (NNFMU_PLUGINS); the registry is restored afterwards."""
+    records, env, path = dict(architectures._RECORDS), os.environ.get("NNFMU_PLUGINS"), list(sys.path)
+    os.environ["NNFMU_PLUGINS"] = "toy_arch"
+    sys.path.insert(0, str(PLUGINS))
+    try:
+        yield architectures.architecture("toy")  # unknown yet: the lookup loads the plugins
+    finally:
+        architectures._RECORDS.clear()
+        architectures._RECORDS.update(records)
+        architectures._loaded.discard("toy_arch")
+        sys.path[:] = path
+        for name in [m for m in sys.modules if m == "toy_arch" or m.startswith("toy_arch.")]:
+            del sys.modules[name]
+        if env is None:
+            os.environ.pop("NNFMU_PLUGINS")
+        else:
+            os.environ["NNFMU_PLUGINS"] = env
+
+
+@pytest.fixture(scope="module")
+def data():
+    """A small nonlinear plant: y+ = 0.8 y + 0.3 tanh(u) (4 records of 80 samples to train, 2 to test)."""
+    from nnfmu.data import from_arrays
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((6, 80, 1)).cumsum(axis=1) * 0.3
+    y = np.zeros((6, 80, 1))
+    for k in range(79):
+        y[:, k + 1] = 0.8 * y[:, k] + 0.3 * np.tanh(u[:, k])
+    return from_arrays(Ts=0.1, u_train=u[:4], y_train=y[:4], u_test=u[4:], y_test=y[4:])
+
+
+def test_the_toy_trains_both_ways_exports_and_scores_in_fmpy(toy, data, tmp_path):
+    from nnfmu.cosim import evaluate
+    from nnfmu.export import casadi_model
+    from nnfmu.export.fmu import build_fmu
+    from nnfmu.models import ModelConfig, load_model
+    from nnfmu.training import TrainConfig, train
+
+    config = ModelConfig.from_dict({"arch": "toy", "n_u": 1, "n_y": 1, "hidden": 6, "leak": 0.3})
+    assert type(config).__name__ == "ToyConfig"  # a stored config finds the plugin's class through the record
+    scores = {}
+    for strategy in ("series-parallel", "parallel"):
+        result = train(data, config, TrainConfig(strategy=strategy, epochs=3, batch_size=2, seed=0),
+                       out=tmp_path / f"{strategy}.pt", device="cpu")
+        assert type(result.model).__name__ == "ToyStepModel" and len(result.history) == 4
+        scores[strategy] = result.test.mean
+    model = load_model(tmp_path / "parallel.pt")
+    fmu = build_fmu(casadi_model(model), tmp_path / "toy.fmu")  # casadi_model checks the export against torch
+    got = evaluate([fmu], data)[0]
+    u, y = data.test.u[0], data.test.y[0]
+    from nnfmu.cosim import FmuSimulator
+
+    with FmuSimulator(fmu, data.input_names, data.output_names, data.Ts) as sim:
+        fmpy_run = sim.simulate(u, y[0])
+    torch_run = model.simulate(u, y[0])
+    assert np.ptp(torch_run) > 0
+    assert float(np.max(np.abs(fmpy_run - torch_run)) / np.max(np.abs(torch_run))) < 1e-9
+    assert got.result.mean == pytest.approx(scores["parallel"], rel=1e-6)
+
+
+def test_nnfmu_train_and_tune_offer_the_toy(toy, data, tmp_path, capsys):
+    from nnfmu.cli import main
+    from nnfmu.data import save_dataset
+    from nnfmu.models import load_model
+
+    env = {**os.environ, "NNFMU_PLUGINS": "toy_arch",
+           "PYTHONPATH": os.pathsep.join([str(PLUGINS), os.environ.get("PYTHONPATH", "")])}
+    helps = {command: " ".join(subprocess.run([sys.executable, "-m", "nnfmu", command, "--help"], env=env,
+                                              capture_output=True, text=True, check=True).stdout.split())
+             for command in ("train", "tune")}
+    for command, text in helps.items():
+        choices = text.partition("--arch ARCH the architecture")[2].partition(": ")[2].partition(" (")[0]
+        assert "toy" in choices.split(", "), (command, choices)
+    assert "--arch toy: a leaky one-layer recurrent toy (a plugin): --toy-leak A" in helps["train"]
+    folder = tmp_path / "data"
+    save_dataset(data, folder)
+    argv = ["train", "--data", str(folder), "--arch", "toy", "--toy-leak", "0.5", "--hidden", "4", "--epochs", "1",
+            "--linear-path", "off", "--quiet", "--out", str(tmp_path / "toy.pt")]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert load_model(tmp_path / "toy.pt").config.leak == 0.5
+    assert main(["train", "--data", str(folder), "--arch", "gru", "--toy-leak", "0.5", "--out", "x.pt"]) == 2
+    assert "--toy-leak only apply to --arch toy" in capsys.readouterr().err
