@@ -107,3 +107,12 @@ def test_nnfmu_train_and_tune_offer_the_toy(toy, data, tmp_path, capsys):
     assert load_model(tmp_path / "toy.pt").config.leak == 0.5
     assert main(["train", "--data", str(folder), "--arch", "gru", "--toy-leak", "0.5", "--out", "x.pt"]) == 2
     assert "--toy-leak only apply to --arch toy" in capsys.readouterr().err
+
+
+def test_a_plugin_that_cannot_be_imported_is_one_warning_not_a_broken_command_line(tmp_path):
+    env = {**os.environ, "NNFMU_PLUGINS": "no_such_plugin"}
+    run = subprocess.run([sys.executable, "-m", "nnfmu", "train", "--data", str(tmp_path), "--arch", "no_such_plugin",
+                          "-o", str(tmp_path / "x.pt")], env=env, capture_output=True, text=True)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "cannot import the architecture plugin 'no_such_plugin'" in run.stderr
+    assert "invalid choice: 'no_such_plugin'" in run.stderr and not (tmp_path / "x.pt").exists()

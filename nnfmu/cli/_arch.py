@@ -9,6 +9,7 @@ that building the parser imports neither torch nor CasADi; the records themselve
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Callable, Iterable
 
 from nnfmu.cli._checks import RULES, Rule
@@ -53,7 +54,12 @@ def option_choices(option: Option):
 def add_architecture_options(p: argparse.ArgumentParser) -> dict[str, list[Option]]:
     """One argument group per architecture with options of its own; returns ``{field: [options]}`` added."""
     added: dict[str, Option] = {}
-    for record in architectures.records():
+    try:
+        records = architectures.records()
+    except ConfigError as exc:  # a broken plugin must not break every command: say so, go on without it
+        print(f"nnfmu: warning: {exc}", file=sys.stderr)
+        records = architectures.records()
+    for record in records:
         group = None
         for option in record.options:
             if option.flag in added:

@@ -204,7 +204,11 @@ def _plugin_modules() -> list[str]:
 
 
 def load_plugins() -> None:
-    """Import every module that the entry points and ``NNFMU_PLUGINS`` name, once each (they register themselves)."""
+    """Import every module that the entry points and ``NNFMU_PLUGINS`` name, once each (they register themselves).
+
+    Raises ConfigError naming the modules that cannot be imported, after importing the others (tried once).
+    """
+    failed = []
     for module in _plugin_modules():
         if module in _loaded:
             continue
@@ -212,8 +216,10 @@ def load_plugins() -> None:
         try:
             importlib.import_module(module)
         except ImportError as exc:
-            raise ConfigError(f"cannot import the architecture plugin {module!r} ({exc}); install it, put its folder "
-                              f"on PYTHONPATH, or drop it from {PLUGINS_ENV}") from exc
+            failed.append(f"{module!r} ({exc})")
+    if failed:
+        raise ConfigError(f"cannot import the architecture plugin {', '.join(failed)}; install it, put its folder "
+                          f"on PYTHONPATH, or drop it from {PLUGINS_ENV}")
 
 
 def architecture(arch: str) -> Architecture:
