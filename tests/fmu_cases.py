@@ -107,6 +107,20 @@ _BUILT: dict[tuple, Path] = {}
 _LOGGERS: list = []
 
 
+def instantiate_logged(folder, md, kind: str, logger):
+    """``fmpy.instantiate_fmu`` with a Python ``logger``, kept alive for the whole session.
+
+    fmpy's FMI 2 logger proxy remembers the last Python logger in a C global and sends every later
+    instance's messages there, even those of instances made with fmpy's default callbacks. A logger
+    that is garbage-collected leaves that global dangling: the next FMU that logs calls freed memory
+    (a segfault, or a stray call into whatever callback took its place). Every test that passes a
+    logger goes through here.
+    """
+    fmu = fmpy.instantiate_fmu(str(folder), md, kind, logger=logger)
+    _LOGGERS.append((logger, getattr(fmu, "callbacks", None), getattr(fmu, "logMessage", None)))
+    return fmu
+
+
 def oscillator_dataset(folder: Path) -> Path:
     """The linear oscillator's tiny dataset (force in N -> pos in m, vel in m/s; 3 train and 1 test trajectory of 60
     samples at 0.01 s) saved in ``folder``, for the CLI tests."""
@@ -177,9 +191,7 @@ class Instance:
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.logs: list[tuple[int, str]] = []
-        self.fmu = fmpy.instantiate_fmu(str(folder), self.md, "CoSimulation", logger=self._log)
-        # fmpy's FMI 2 logger proxy remembers the last logger in a C global: keep every one alive
-        _LOGGERS.append(getattr(self.fmu, "callbacks", None) or getattr(self.fmu, "logMessage", None))
+        self.fmu = instantiate_logged(folder, self.md, "CoSimulation", self._log)
         self.time = 0.0
 
     def _log(self, *args) -> None:  # FMI 2: (env, name, status, category, msg); FMI 3: (env, status, category, msg)

@@ -23,7 +23,7 @@ import fmpy.fmi3
 import fmpy.sundials
 import numpy as np
 import pytest
-from fmu_cases import MODELS, built_fmu, unzipped
+from fmu_cases import MODELS, built_fmu, instantiate_logged, unzipped
 from test_fmu_model_exchange import MeInstance, pendulum
 
 from nnfmu.system import CasadiModel
@@ -119,7 +119,7 @@ def test_model_exchange_range_warning_speaks_of_evaluations(version):
     folder = unzipped(built_fmu("pendulum", version))
     md = fmpy.read_model_description(str(folder))
     messages: list[str] = []
-    fmu = fmpy.instantiate_fmu(str(folder), md, "ModelExchange", logger=lambda *a: messages.append(a[-1].decode()))
+    fmu = instantiate_logged(folder, md, "ModelExchange", lambda *a: messages.append(a[-1].decode()))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     if version == 3:
         fmu.enterInitializationMode(startTime=0.0)
