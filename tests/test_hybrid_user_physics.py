@@ -147,6 +147,24 @@ def test_a_zero_correction_is_exactly_the_physics(which, backend, model_file, fi
     assert _relative(model.simulate(u, y[0]), want) < 1e-13
 
 
+def test_a_zero_step_correction_is_exactly_the_physics_too(model_file, data):
+    ds, _ = data
+    system = resolve_physics(f"{model_file}:viscous_slider")
+    model = HybridStepModel(HybridConfig(n_u=1, n_y=1, physics=system, hidden=4, correction="step"), ds.meta())
+    u, y = ds.test.u[0], ds.test.y[0]
+    assert _relative(model.double().simulate(u, y[0]), physics_run(system, u, y[0])) < 1e-13
+
+
+def test_a_stored_hybrid_config_from_before_the_registry_still_loads():
+    old = {"arch": "hybrid", "n_u": 1, "n_y": 1, "hidden": 8, "layers": 2, "window": 1, "activation": "tanh",
+           "dropout": 0.0, "physics": "slider", "physics_params": {"d": 2.5}, "train_physics": ["d"],
+           "train_physics_gain": 10.0, "correction": "derivative", "corrected_states": ["v"],
+           "correction_time": 0.1, "n_sub": None, "physics_backend": "compiled"}
+    config = HybridConfig.from_dict(old)
+    assert config.physics_document is None and config.parameter_values()[:2] == [1.0, 2.5]
+    assert {k: v for k, v in config.to_dict().items() if k in old} == old
+
+
 def test_defaults_come_from_the_registry_or_cover_every_state(model_file):
     slider = HybridConfig(n_u=1, n_y=1, physics="slider")
     assert (slider.corrected_states, slider.correction_time, slider.train_physics) == (("v",), 0.1, ())
