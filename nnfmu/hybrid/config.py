@@ -239,6 +239,12 @@ class HybridConfig(ModelConfig):
         given = dict(self.physics_params)
         return [given.get(v.name, v.start) for v in self.system().parameters]
 
+    def replace(self, **changes) -> "HybridConfig":
+        """A copy with ``changes``; a new :attr:`physics` replaces the stored document too (unless one is given)."""
+        if "physics" in changes:
+            changes.setdefault("physics_document", None)
+        return super().replace(**changes)
+
     def to_dict(self) -> dict:
         """Plain dict (JSON- and ``weights_only``-safe); ``physics_params`` and the physics document as dicts.
 
