@@ -1,4 +1,8 @@
-"""``nnfmu export CHECKPOINT -o MODEL.fmu``: a trained network as a standalone FMU.
+"""``nnfmu export CHECKPOINT -o MODEL.fmu``: a trained network, or a grey-box fit, as a standalone FMU.
+
+A checkpoint (``.pt``) is a trained network. A ``.json`` file written by ``nnfmu fit`` is a fitted physics
+model: it becomes an FMU as ``nnfmu physics-fmu`` builds one (RK4 inside doStep, Model Exchange with
+directional derivatives too, the parameters tunable with the estimates as their start values).
 
 The same command is ``python -m nnfmu.export CHECKPOINT -o MODEL.fmu`` (see
 :mod:`nnfmu.export.__main__`); both share :func:`add_arguments` and :func:`export_checkpoint`.
@@ -12,7 +16,8 @@ from pathlib import Path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("checkpoint", help="a checkpoint written by 'nnfmu train' (.pt)")
+    parser.add_argument("checkpoint", help="a checkpoint written by 'nnfmu train' (.pt), or a grey-box fit written "
+                                           "by 'nnfmu fit' (.json)")
     parser.add_argument("-o", "--out", help="the .fmu file to write (default: the checkpoint's name with .fmu)")
     add_fmu_options(parser)
     parser.add_argument("--name", help="the FMU's model name and modelIdentifier (a C identifier; default: "
@@ -86,6 +91,18 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
     return path
 
 
+def fitted_model(path: str, name: str | None = None):
+    """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model."""
+    import dataclasses
+
+    from nnfmu.greybox import load_fit
+
+    system, _ = load_fit(path)
+    if name is not None:
+        system = dataclasses.replace(system, name=name)
+    return system.model(expose_parameters=True)
+
+
 def export_checkpoint(args: argparse.Namespace) -> int:
     import re
 
@@ -98,6 +115,9 @@ def export_checkpoint(args: argparse.Namespace) -> int:
     check_fmu_options(args)
     out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
     check_writable(out)
+    if Path(args.checkpoint).suffix.lower() == ".json":
+        write_fmu(fitted_model(args.checkpoint, args.name), out, args)
+        return 0
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 
@@ -107,6 +127,7 @@ def export_checkpoint(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="export a trained network as an FMU (same as python -m nnfmu.export)")
+    p = sub.add_parser("export", help="export a trained network or a grey-box fit as an FMU (same as python -m "
+                                      "nnfmu.export)")
     add_arguments(p)
     p.set_defaults(func=export_checkpoint)
