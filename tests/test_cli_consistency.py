@@ -10,7 +10,8 @@ import pytest
 from nnfmu.cli import build_parser, main
 from nnfmu.data import Channel, from_arrays, save_dataset
 
-WRITERS = {"demo", "evaluate", "export", "generate", "import", "linear", "physics-fmu", "reproduce", "train", "tune"}
+WRITERS = {"demo", "evaluate", "export", "fit", "generate", "import", "linear", "physics-fmu", "reproduce", "train",
+           "tune"}
 REST = re.compile(r"``|:(mod|class|func|meth|data|attr):`")
 
 

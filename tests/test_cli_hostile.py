@@ -31,12 +31,14 @@ ACCEPTED = {
     ("train", "--feedback-noise"): {"0"}, ("train", "--patience"): {"0", HUGE[int]},
     ("tune", "--patience"): {"0", HUGE[int]}, ("tune", "--gpus-per-trial"): {"0"},
     ("evaluate", "--trajectory"): {"0"}, ("evaluate", "--horizon"): {HUGE[int]}, ("generate", "--noise"): {"0"},
+    ("fit", "--seed"): {"0"},
 }
 #: Work that a command starts once its arguments are accepted; each is replaced by WorkStarted.
 WORK = ["nnfmu.training.train", "nnfmu.training.train_seeds", "nnfmu.linear.identify_linear",
         "nnfmu.export.build_fmu", "nnfmu.cosim.simulate_split", "nnfmu.study.run_demo",
         "nnfmu.study.pipeline.Study.check_manifest",  # reproduce: after its own input checks, before any cell
-        "nnfmu.study.tune_architecture", "nnfmu.physics.generate_dataset", "nnfmu.data.save_dataset"]
+        "nnfmu.study.tune_architecture", "nnfmu.physics.generate_dataset", "nnfmu.data.save_dataset",
+        "nnfmu.greybox.fit_greybox"]
 
 
 class WorkStarted(BaseException):
@@ -94,6 +96,7 @@ def base_argv(command: str, w: dict, out: Path) -> list[str]:
         "demo": ["demo", "--quiet", "-o", str(out / "demo")],
         "evaluate": ["evaluate", "--data", d, w["fmu"], "-o", str(out / "scores")],
         "export": ["export", w["ckpt"], "-o", str(out / "m.fmu")],
+        "fit": ["fit", "slider", "--data", d, "--quiet", "-o", str(out / "fit.json")],
         "generate": ["generate", "valve", "--size", "small", "--quiet", "-o", str(out / "gen")],
         "import": ["import", "csv", w["csv"], "--inputs", "u", "--outputs", "y", "--Ts", "0.01",
                    "--test", w["csv2"], "-o", str(out / "imported")],
@@ -172,6 +175,7 @@ OUTPUTS = {"out", "json", "plots", "save", "storage"}
 TEXT = {"target_isa", "platforms", "name", "address", "device", "grid", "size", "inputs", "outputs", "units", "time",
         "Ts_column", "fs_column", "test_columns", "valid_columns", "train_physics", "data_dir", "increment",
         "system"}  # system: a physics spec (a built-in name, file.py:NAME or a .json; tests/test_user_physics_cli.py)
+TEXT |= {"free", "fixed", "bounds", "start"}  # fit: parameter names and NAME=VALUE lists
 #: Commands whose outputs are checked when written, not before the work starts (their writers keep the contract
 #: at write time; tests/test_cli_contract.py writes through them for real).
 LATE_OUTPUT_CHECK = {"demo", "generate", "import"}

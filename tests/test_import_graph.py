@@ -25,7 +25,7 @@ LAYERS = (
     ("ground", {"errors", "atomic", "cbuild", "identifiers", "_lazy", "__version__", "tempdirs", "window_names",
                 "system", "signals", "metrics", "valid_range", "protocols", "limits", "progress"}),
     ("data", {"data"}),
-    ("physics, linear and co-simulation", {"physics", "linear", "cosim", "plots"}),
+    ("physics, linear and co-simulation", {"physics", "linear", "cosim", "plots", "greybox"}),
     ("models", {"models"}),
     ("training", {"training"}),
     ("export", {"export"}),

@@ -79,6 +79,8 @@ RULES: dict[str | tuple[str, str], Rule] = {
     "order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "max_order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "max_evaluations": Rule(1, 10_000_000),
+    # fit
+    "starts": Rule(1, 1000, fix="each start is a whole fit; a few spread inside the bounds are usual"),
     # import
     "Ts": Rule(0, 366 * 86400.0, lo_open=True, fix="give the sample time in seconds"),
     "resample": Rule(1, 1_000_000), "valid_fraction": Rule(0, 1, lo_open=True, hi_open=True, fix="e.g. 0.2"),
