@@ -147,6 +147,25 @@ def test_a_zero_correction_is_exactly_the_physics(which, backend, model_file, fi
     assert _relative(model.simulate(u, y[0]), want) < 1e-13
 
 
+def test_both_backends_give_the_same_gradients_on_a_users_model(model_file, data):
+    ds, _ = data
+    u = torch.tensor(ds.test.u[0][None, :40])
+    y = torch.tensor(ds.test.y[0][None, :40])
+    grads = []
+    for backend in ("compiled", "sx"):
+        torch.manual_seed(0)
+        config = HybridConfig(n_u=1, n_y=1, physics=f"{model_file}:quadratic_slider", hidden=4, physics_backend=backend)
+        model = build_model(config, ds.meta(), norm=ds.norm_stats("train")).double()
+        with torch.no_grad():
+            for prm in model.correction.parameters():
+                prm.copy_(0.3 * torch.randn(prm.shape, dtype=torch.float64))
+            model.physics_log_scale.fill_(0.01)
+        (model(u, y[:, 0]) - y).pow(2).mean().backward()
+        grads.append(torch.cat([p.grad.reshape(-1) for p in model.parameters() if p.grad is not None]))
+    assert grads[0].abs().max() > 0 and grads[0].numel() == grads[1].numel()
+    torch.testing.assert_close(grads[1], grads[0], rtol=1e-10, atol=1e-12 * float(grads[0].abs().max()))
+
+
 def test_a_zero_step_correction_is_exactly_the_physics_too(model_file, data):
     ds, _ = data
     system = resolve_physics(f"{model_file}:viscous_slider")
