@@ -7,16 +7,19 @@ forward pass, the backward pass and the AdamW update. The data are random
 second of process CPU time (``time.process_time``: all threads of the process
 count), and wall-clock rates beside them; the variants are run interleaved,
 ``--repeats`` rounds, and the median is printed with the ratios measured in
-the same run. Pin it to one core on a shared machine::
+the same run. Pin it on a shared machine: the threads comparison to as many
+cores as its threads (it refuses fewer), the others to one core::
 
-    taskset -c 1 python benchmarks/train_throughput.py --compare threads
+    taskset -c 0,1 python benchmarks/train_throughput.py --compare threads --many-threads 2
     taskset -c 1 python benchmarks/train_throughput.py --compare strategies --archs gru lstm --hidden 32
     taskset -c 1 python benchmarks/train_throughput.py --compare paths --archs gru lstm --hidden 32
 
 Comparisons (``--compare``):
 
-- ``threads``: torch's default thread count (all cores) against one thread, the
-  nnfmu default (:mod:`nnfmu.training.resources`);
+- ``threads``: ``--many-threads`` torch threads (default 2; ``torch.set_num_threads``, on at
+  least as many cores of the process's affinity) against one thread, the nnfmu default
+  (:mod:`nnfmu.training.resources`). Under ``taskset -c 1`` torch's own default is one thread,
+  so the two arms would be the same: the comparison sets the count itself;
 - ``strategies``: parallel against series-parallel, for each ``--archs``;
 - ``paths``: the parallel update in torch (the free run as torch operations, AdamW's
   default implementation: nnfmu before the compiled paths) against nnfmu's training path
@@ -26,6 +29,7 @@ Comparisons (``--compare``):
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
@@ -37,7 +41,6 @@ from nnfmu.training.compiled_rollout import training_rollout
 from nnfmu.training.resources import adamw
 
 N_TRAJ, N_STEPS, N_U, N_Y = 900, 500, 2, 2
-DEFAULT_THREADS = torch.get_num_threads()
 
 
 def plain_adamw(params):
@@ -62,12 +65,22 @@ def time_updates(rollout, model, un, yn, batch: int, n_batches: int, optimiser=p
     return time.process_time() - c0, time.perf_counter() - t0
 
 
-def variants(kind: str, model, threads: int | None) -> dict:
-    """name -> (rollout, threads, optimiser) of the comparison ``kind``."""
+def check_cores(many: int, cores: set[int] | None = None) -> None:
+    """Refuse a threads comparison of ``many`` threads on fewer cores than that (``cores``: the affinity)."""
+    cores = os.sched_getaffinity(0) if cores is None else cores
+    if many < 2:
+        raise SystemExit(f"train_throughput.py: --many-threads {many} compares nothing with 1 thread; use 2 or more")
+    if len(cores) < many:
+        raise SystemExit(f"train_throughput.py: --many-threads {many} on {len(cores)} core(s) {sorted(cores)}; "
+                         f"pin to {many} cores, e.g. taskset -c 0-{many - 1}")
+
+
+def variants(kind: str, model, threads: int | None, many: int = 2) -> dict:
+    """name -> (rollout, threads, optimiser) of the comparison ``kind`` (``many``: the threads arm's count)."""
     parallel = lambda u, y: model.rollout_normalised(u, y[:, 0])  # noqa: E731
     one = threads or 1
     if kind == "threads":
-        return {f"{DEFAULT_THREADS} threads (torch default)": (parallel, DEFAULT_THREADS, plain_adamw),
+        return {f"{many} threads": (parallel, many, plain_adamw),
                 "1 thread (nnfmu default)": (parallel, 1, plain_adamw)}
     if kind == "paths":
         model.train()
@@ -99,7 +112,10 @@ def main() -> None:
     p.add_argument("--batches", type=int, default=2, help="optimiser steps timed per run")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--threads", type=int, default=None, help="threads of the strategies comparison (default 1)")
+    p.add_argument("--many-threads", type=int, default=2, help="threads of the threads comparison's first arm")
     args = p.parse_args()
+    if args.compare == "threads":
+        check_cores(args.many_threads)
     torch.set_flush_denormal(True)  # as nnfmu.training.train does (see session.flush_denormals)
     g = torch.Generator().manual_seed(0)
     un = torch.randn(N_TRAJ, N_STEPS, N_U, generator=g)
@@ -112,8 +128,8 @@ def main() -> None:
         model = build_model(ModelConfig(arch=arch, n_u=N_U, n_y=N_Y, hidden=args.hidden))
         for batch in args.batch_sizes:
             n_batches = max(1, min(args.batches, N_TRAJ // batch))
-            rates = measure(variants(args.compare, model, args.threads), model, un, yn, batch, n_batches,
-                            args.repeats)
+            rates = measure(variants(args.compare, model, args.threads, args.many_threads), model, un, yn, batch,
+                            n_batches, args.repeats)
             names = list(rates)
             for name in names:
                 print(f"{arch:>4s} batch {batch:4d} {name:<32s} {rates[name][0]:10.0f} /CPU-s  "
