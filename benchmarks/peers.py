@@ -52,7 +52,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 INIT = 50  # as peers_train.INIT
 HIDDEN = 32
-CONTENDERS = ("nnfmu", "deepsi-subnet", "deepsi-gru", "tsfast-gru")
+CONTENDERS = ("nnfmu", "deepsi-subnet", "deepsi-fit-nnfmu-gru", "tsfast-ar-gru", "tsfast-gru")
+DEFAULT_CONTENDERS = ("nnfmu", "deepsi-subnet", "deepsi-fit-nnfmu-gru", "tsfast-ar-gru")
 
 
 def make_data(size: str, seed: int, folder: Path) -> Path:
@@ -175,7 +176,7 @@ def main() -> None:
     p.add_argument("--peers-python", default=os.environ.get("NNFMU_PEERS_PYTHON", "peers-venv/bin/python"),
                    help="python of the peers' virtual environment (see above)")
     p.add_argument("--sets", nargs="+", default=["small", "paper"], choices=["small", "paper"])
-    p.add_argument("--contenders", nargs="+", default=list(CONTENDERS), choices=CONTENDERS)
+    p.add_argument("--contenders", nargs="+", default=list(DEFAULT_CONTENDERS), choices=CONTENDERS)
     p.add_argument("--budget", type=float, default=60.0, help="CPU-seconds of training per run")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--cpu", type=int, default=1, help="the core every run is pinned to")

@@ -26,6 +26,9 @@ import torch
 
 HIDDEN = 32
 INIT = 50  # measured samples every model may use to set its state before scoring (as peers.py)
+# deepSI 0.4.4 has no recurrent network: "deepsi-fit-nnfmu-gru" is nnfmu's GRU with output feedback,
+# written here in torch as a deepSI Custom_SUBNET and trained by deepSI.fit (deepSI's loop, not its model).
+PEERS = ("deepsi-subnet", "deepsi-fit-nnfmu-gru", "tsfast-ar-gru", "tsfast-gru")
 
 
 class BudgetSpent(Exception):
@@ -144,18 +147,8 @@ def train_tsfast(arrays, work: Path, budget: Budget) -> tuple[np.ndarray, int, d
                      win_sz=win, bs=bs)
     learner = RNNLearner(dls, rnn_type="gru", hidden_size=HIDDEN, num_layers=1, n_skip=INIT, show_bar=False,
                          device=torch.device("cpu"))
-    budget.start()
-    learner.setup()  # what Learner.fit does, epoch by epoch, so that the budget can end it between epochs
-    epochs = 0
-    while True:
-        learner.train_one_epoch(epoch=epochs, n_epoch=epochs + 1)
-        learner.validate()
-        epochs += 1
-        try:
-            budget.check()
-        except BudgetSpent:
-            break
-    info = {"win_sz": win, "bs": bs, "epochs": epochs, "cpu_s": budget.spent()[0], "wall_s": budget.spent()[1]}
+    epochs = _epochs_until_spent(learner, budget)
+    info = {"learner": "RNNLearner", "win_sz": win, "bs": bs, "epochs": epochs, "cpu_s": budget.spent()[0], "wall_s": budget.spent()[1]}
     learner.model.eval()
     preds = []
     with torch.no_grad():
@@ -166,9 +159,69 @@ def train_tsfast(arrays, work: Path, budget: Budget) -> tuple[np.ndarray, int, d
     return np.stack(preds), epochs * len(dls.train) * bs * win, info
 
 
+def train_tsfast_ar(arrays, work: Path, budget: Budget) -> tuple[np.ndarray, int, dict]:
+    """tsfast's output-feedback learner, ``AR_RNNLearner`` (GRU-32): windows of 100, batch 64 (its defaults).
+
+    It trains one step ahead with the measured outputs fed back (teacher forcing), here with
+    ``prediction_concat(t_offset=1)``: the input at step k is (u_k, y_{k-1}). AR_RNNLearner's own
+    default, ``t_offset=0``, gives the network y_k among the inputs that predict y_k (its free run
+    diverged: NRMSE 3.10 after one epoch in a trial run). The test free run uses tsfast's
+    ``AR_Model`` in autoregressive mode on the trained network, its hidden state carried from step
+    to step: teacher-forced through the first INIT samples, then fed its own predictions.
+    """
+    from tsfast.models._core.layers import AR_Model
+    from tsfast.training import AR_RNNLearner
+    from tsfast.training.transforms import prediction_concat
+    from tsfast.tsdata import create_dls
+
+    _hdf5_folders(arrays, work)
+    n_u, n_y = arrays["train_u"].shape[-1], arrays["train_y"].shape[-1]
+    win, bs = 100, 64
+    dls = create_dls(u=[f"u{j}" for j in range(n_u)], y=[f"y{j}" for j in range(n_y)], dataset=work,
+                     win_sz=win, bs=bs)
+    learner = AR_RNNLearner(dls, rnn_type="gru", hidden_size=HIDDEN, num_layers=1, n_skip=INIT, show_bar=False,
+                            device=torch.device("cpu"), transforms=[prediction_concat(t_offset=1)])
+    epochs = _epochs_until_spent(learner, budget)
+    info = {"learner": "AR_RNNLearner", "win_sz": win, "bs": bs, "epochs": epochs, "cpu_s": budget.spent()[0],
+            "wall_s": budget.spent()[1]}
+    scaled = learner.model.eval()  # ScaledModel(AR_Model(SimpleRNN)): normalises [u, y], denormalises y
+    net = scaled.model.model
+    net.return_state = True
+    free_run = AR_Model(net, ar=True, model_has_state=True, return_state=True, out_sz=n_y)
+    preds = []
+    with torch.no_grad():
+        for u, y in zip(arrays["test_u"], arrays["test_y"]):
+            uy = np.concatenate([u[1:INIT], y[:INIT - 1]], 1)  # (u_k, y_{k-1}), k < INIT: as in training
+            uy = scaled.input_norm.normalize(torch.as_tensor(uy[None], dtype=torch.float32))
+            _, state = free_run(uy, ar=False)
+            y_last = torch.as_tensor(np.concatenate([u[INIT - 1], y[INIT - 1]])[None, None], dtype=torch.float32)
+            state = {"h": state["h"], "y_init": scaled.input_norm.normalize(y_last)[:, :, n_u:]}
+            un = scaled.input_norm.normalize(torch.as_tensor(np.concatenate([u, y], 1)[None], dtype=torch.float32))
+            out, _ = free_run(un[:, INIT:, :n_u], state=state, ar=True)
+            pred = np.full(y.shape, np.nan)
+            pred[INIT:] = scaled.output_norm.denormalize(out)[0].numpy()
+            preds.append(pred)
+    return np.stack(preds), epochs * len(dls.train) * bs * (win - 1), info  # t_offset=1: windows of win - 1
+
+
+def _epochs_until_spent(learner, budget: Budget) -> int:
+    """What Learner.fit does, epoch by epoch, until the budget is spent; returns the epochs run."""
+    budget.start()
+    learner.setup()
+    epochs = 0
+    while True:
+        learner.train_one_epoch(epoch=epochs, n_epoch=epochs + 1)
+        learner.validate()
+        epochs += 1
+        try:
+            budget.check()
+        except BudgetSpent:
+            return epochs
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("peer", choices=["deepsi-subnet", "deepsi-gru", "tsfast-gru"])
+    p.add_argument("peer", choices=PEERS)
     p.add_argument("--arrays", required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--budget", type=float, required=True, help="CPU-seconds of training")
@@ -180,8 +233,10 @@ def main() -> None:
     arrays = dict(np.load(args.arrays))
     out = Path(args.out)
     budget = Budget(args.budget)
-    if args.peer.startswith("deepsi"):
-        pred, steps, info = train_deepsi(arrays, args.peer.split("-")[1], budget)
+    if args.peer.startswith("deepsi-"):
+        pred, steps, info = train_deepsi(arrays, "subnet" if args.peer == "deepsi-subnet" else "nnfmu-gru", budget)
+    elif args.peer == "tsfast-ar-gru":
+        pred, steps, info = train_tsfast_ar(arrays, out.with_suffix(".hdf5-data"), budget)
     else:
         pred, steps, info = train_tsfast(arrays, out.with_suffix(".hdf5-data"), budget)
     np.savez(out.with_suffix(".npz"), pred=pred)
