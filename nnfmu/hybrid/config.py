@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 from nnfmu.errors import ConfigError, ShapeError, UnknownOptionError
@@ -101,7 +101,7 @@ class HybridConfig(ModelConfig):
 
     arch: str = "hybrid"
     physics: str = "valve"
-    physics_document: Mapping | str | None = field(default=None, repr=False)  # long: the repr shows physics
+    physics_document: Mapping | str | None = dataclasses.field(default=None, repr=False)  # long: repr shows physics
     physics_params: Mapping = ()
     train_physics: tuple | None = None
     train_physics_gain: float = 10.0
