@@ -8,17 +8,20 @@ contenders interleaved round by round. Each uses its own training loop with its 
 - nnfmu: ``nnfmu.train`` (GRU-32, parallel, batch 64, validation free run and best-epoch
   keeping every epoch; whole trajectories, or windows of ``--truncate`` samples);
 - deepSI: ``deepSI.fit`` (windows of T=50, batch 256, Adam, validation every 250 iterations)
-  on its own SUBNET model (``deepsi-subnet``) and on nnfmu's GRU-32 written as a deepSI model
-  (``deepsi-gru``);
-- tsfast: ``RNNLearner`` (a GRU-32 from inputs to outputs, windows of 100, batch 64, 300
-  batches per epoch, validation every epoch).
+  on its own SUBNET model (``deepsi-subnet``: deepSI 0.4.4 has no recurrent network, so this is
+  its closest real model), and on nnfmu's GRU-32 with output feedback written in torch as a
+  deepSI ``Custom_SUBNET`` (``deepsi-fit-nnfmu-gru``: deepSI's training loop, nnfmu's network);
+- tsfast: ``AR_RNNLearner`` (``tsfast-ar-gru``: its output-feedback GRU-32, trained one step
+  ahead with the measured outputs fed back, free-run at test; see peers_train.py), windows of
+  100, batch 64, 300 batches per epoch, validation every epoch; ``RNNLearner`` (``tsfast-gru``:
+  a GRU-32 from inputs to outputs only) on request.
 
 A trajectory-step is one sample of one training sequence through forward pass, backward pass
 and update; the CPU time includes everything else the loop does (validation, batching). The
 peers receive the arrays standardised with the training statistics (nnfmu standardises inside
 its models). Every model is scored the same way: given the first 50 measured samples of each
-test trajectory (to set its state: nnfmu and deepSI-GRU start from sample 49, SUBNET's encoder
-reads 20 samples, tsfast's GRU runs through them), NRMSE of the free run over the rest
+test trajectory (to set its state: nnfmu and the deepSI-fit GRU start from sample 49, SUBNET's
+encoder reads 20 samples, tsfast's GRUs run through them), NRMSE of the free run over the rest
 (docs/design.md's rule: mean over outputs and trajectories of RMSE / std).
 
 Installing the peers (once, into their own virtual environment: their dependencies are not
@@ -29,10 +32,18 @@ nnfmu's, and torch must be the CPU wheel, pinned first as in the Makefile)::
     echo "torch==2.13.0" > constraints.txt
     peers-venv/bin/pip install -c constraints.txt deepSI==0.4.4 tsfast==0.5.0
 
+or, without a second torch, into a folder on top of nnfmu's environment (which already has
+numpy, scipy, h5py, pandas, tqdm and nonlinear_benchmarks; ``--no-deps`` keeps pip off torch)::
+
+    .venv/bin/pip install --no-deps --target /tmp/peers deepSI==0.4.4 tsfast==0.5.0 identibench==0.4.0 cloudpickle
+    export PYTHONPATH=/tmp/peers   # then pass --peers-python .venv/bin/python
+
 Running (from the repository, with nnfmu's own environment)::
 
-    python benchmarks/peers.py --peers-python peers-venv/bin/python --sets small paper --budget 90 --rounds 2 \
+    python benchmarks/peers.py --peers-python peers-venv/bin/python --sets small --budget 20 --rounds 3 \
         --truncate 200
+
+It prints each contender's rate and NRMSE in every round, so the spread over repeats shows.
 """
 
 from __future__ import annotations
@@ -165,7 +176,9 @@ def report(size: str, results: dict) -> None:
     base = statistics.median(rates["nnfmu"]) if "nnfmu" in rates else None
     for name, runs in results.items():
         rate, nrmse_ = statistics.median(rates[name]), statistics.median(r["nrmse"] for r in runs)
-        ratio = "" if name == "nnfmu" or base is None else f"   nnfmu / {name}: {base / rate:.2f}x"
+        ratio = "" if name == "nnfmu" or base is None else (
+            f"   nnfmu / {name}: {base / rate:.2f}x (rounds: "
+            + ", ".join(f"{a / b:.2f}" for a, b in zip(rates["nnfmu"], rates[name])) + ")")
         spread = ", ".join(f"{x / 1e3:.0f}k" for x in rates[name])
         each = ", ".join(f"{r['nrmse']:.4f}" for r in runs)
         print(f"  {name:14s} {rate / 1e3:7.0f}k /CPU-s ({spread})   NRMSE {nrmse_:.4f} ({each}){ratio}", flush=True)
