@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from typing import Mapping, NamedTuple
 
 import torch
@@ -250,13 +251,24 @@ class HybridStepModel(StepModel):
         for k in range(un.shape[1] - 1):
             x, y = self._advance(x, u[:, k], un[:, k], p, plan)
             ys.append(self.normalise_y(y))
-        return torch.stack(ys, dim=1)
+        out = torch.stack(ys, dim=1)
+        if self.training and not bool(torch.isfinite(out).all()):
+            _warn_blow_up(self)
+        return out
 
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
 
     def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
+
+
+def _warn_blow_up(model: "HybridStepModel") -> None:
+    """Say that the simulation, not the data, went non-finite (the trainer then stops and keeps the best weights)."""
+    values = ", ".join(f"{k} = {v:.4g}" for k, v in model.physics_parameter_values().items())
+    warnings.warn(f"the {model.physics.name} hybrid's simulation became non-finite in training: its ODE blew up "
+                  f"(physical parameters {values}); check the model and its parameters, or lower the learning rate",
+                  RuntimeWarning, stacklevel=3)
 
 
 def _trained_bounds(system: PhysicsSystem, trained) -> tuple[torch.Tensor | None, torch.Tensor | None]:
