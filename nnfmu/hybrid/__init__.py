@@ -52,7 +52,25 @@ if TYPE_CHECKING:  # what _LAZY imports on first use, for readers and tools (mkd
     from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
     from nnfmu.hybrid.model import HybridStepModel
 
-__all__ = sorted(_LAZY)
+__all__ = [
+    "BACKENDS",
+    "CORRECTIONS",
+    "CompiledFunction",
+    "GRADIENT_MODES",
+    "HYBRID_ARCH",
+    "HybridConfig",
+    "HybridStepModel",
+    "PHYSICS",
+    "SUPPORTED_OPS",
+    "TorchFunction",
+    "casadi_to_torch",
+    "compiled_to_torch",
+    "hybrid_casadi_model",
+    "hybrid_to_casadi",
+    "load_physics_params",
+    "physics_system",
+    "sx_to_torch",
+]
 
 __getattr__, __dir__ = lazy_exports("nnfmu.hybrid", globals(), _LAZY)
 

@@ -48,6 +48,25 @@ if TYPE_CHECKING:  # what _LAZY imports on first use, for readers and tools (mkd
     from nnfmu.models.tcn import TCNStepModel
     from nnfmu.models.window import WindowStepModel
 
-__all__ = sorted([*_LAZY, "Architecture", "Option", "register_architecture"])
+__all__ = [
+    "ACTIVATIONS",
+    "ARCHS",
+    "Architecture",
+    "EnsembleStepModel",
+    "MLPStepModel",
+    "ModelConfig",
+    "Option",
+    "RecurrentStepModel",
+    "StepModel",
+    "TCNStepModel",
+    "WindowStepModel",
+    "build_model",
+    "load_checkpoint",
+    "load_model",
+    "model_from_checkpoint",
+    "register_architecture",
+    "save_checkpoint",
+    "tcn_receptive_field",
+]
 
 __getattr__, __dir__ = lazy_exports("nnfmu.models", globals(), _LAZY)
