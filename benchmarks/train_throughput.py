@@ -91,7 +91,7 @@ def variants(kind: str, model, threads: int | None, many: int = 2) -> dict:
 
 
 def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int) -> dict:
-    """Interleaved repeats; name -> (median CPU rate, median wall rate) in trajectory-steps/s."""
+    """Interleaved repeats; name -> (median CPU rate, median wall rate, every CPU rate) in trajectory-steps/s."""
     cpu, wall = {k: [] for k in runs}, {k: [] for k in runs}
     steps = n_batches * batch * N_STEPS
     for _ in range(repeats):
@@ -100,7 +100,7 @@ def measure(runs: dict, model, un, yn, batch: int, n_batches: int, repeats: int)
             c, w = time_updates(rollout, model, un, yn, batch, n_batches, optimiser)
             cpu[name].append(steps / c)
             wall[name].append(steps / w)
-    return {k: (statistics.median(cpu[k]), statistics.median(wall[k])) for k in runs}
+    return {k: (statistics.median(cpu[k]), statistics.median(wall[k]), cpu[k]) for k in runs}
 
 
 def main() -> None:
@@ -132,8 +132,9 @@ def main() -> None:
                             n_batches, args.repeats)
             names = list(rates)
             for name in names:
+                each = ", ".join(f"{r:.0f}" for r in rates[name][2])
                 print(f"{arch:>4s} batch {batch:4d} {name:<32s} {rates[name][0]:10.0f} /CPU-s  "
-                      f"({rates[name][1]:9.0f} /s wall)")
+                      f"({rates[name][1]:9.0f} /s wall; each run /CPU-s: {each})")
             base = rates[names[0]]
             print(f"{'':14s} ratio {names[-1]} / {names[0]}: {rates[names[-1]][0] / base[0]:.2f} per CPU-second, "
                   f"{rates[names[-1]][1] / base[1]:.2f} wall")
