@@ -5,11 +5,15 @@ Both take the :class:`~nnfmu.greybox.problem.Problem`'s CasADi residuals and exa
 - ``"trf"`` (default): :func:`scipy.optimize.least_squares` with ``method="trf"``, bounds on the free
   parameters, the CasADi Jacobian at every iteration. A Gauss-Newton method: it uses the structure of
   a least-squares cost (``J^T J`` for the Hessian), which is all this problem needs.
-- ``"ipopt"``: CasADi's ``nlpsol("ipopt")`` on the same cost with CasADi's exact Hessian, an interior
-  point method for general constrained problems.
+- ``"ipopt"``: CasADi's ``nlpsol("ipopt")`` on the same cost, an interior point method for general
+  constrained problems, given the same Gauss-Newton Hessian ``J^T J`` (from CasADi's own AD of the
+  residual graph). IPOPT with CasADi's exact Hessian was slower still: on the slider it had not converged
+  after 100 iterations and two minutes.
 
-On the slider and the valve (benchmarks/greybox_slider.py, docs/greybox.md) both reach the same cost;
-trf needs fewer and cheaper iterations (no second derivatives of the RK4 free run), so it is the default.
+Measured on the slider and the valve (benchmarks/greybox_slider.py prints the table): both reach the same
+cost, trf several times faster (its Jacobian comes from forward sensitivities carried along the RK4
+steps, :meth:`~nnfmu.greybox.problem.Problem.blocks`, cheaper than CasADi's generic MX Jacobian that
+IPOPT evaluates), so trf is the default.
 
 Either way a diverging run (a step into parameters where the free run blows up to NaN or Inf) does not
 lose what was found: every evaluation with a finite cost lower than the best so far is kept
@@ -79,12 +83,21 @@ def _trf(problem, z0, lower, upper, max_evaluations, tracker) -> str:
     return result.message
 
 
-def _ipopt(problem, z0, lower, upper, max_evaluations, tracker) -> str:
+def _gauss_newton_hessian(z: ca.MX, r: ca.MX) -> ca.Function:
+    """IPOPT's ``hess_lag`` as Gauss-Newton's ``lam_f J^T J`` (upper triangle): no second derivatives of the run."""
+    lam_f, lam_g, p = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0), ca.MX.sym("p", 0)
+    J = ca.jacobian(r, z)
+    return ca.Function("nlp_hess_l", [z, p, lam_f, lam_g], [lam_f * ca.triu(J.T @ J)],
+                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+
+
+def _ipopt(problem, z0, lower, upper, max_evaluations, tracker, *, exact_hessian: bool = False) -> str:
     z = ca.MX.sym("z", problem.n_z)
     r = problem.residuals(z)
-    solver = ca.nlpsol("greybox", "ipopt", {"x": z, "f": 0.5 * ca.sumsqr(r)},
-                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-                        "ipopt.max_iter": int(max_evaluations)})
+    options = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": int(max_evaluations)}
+    if not exact_hessian:
+        options["hess_lag"] = _gauss_newton_hessian(z, r)
+    solver = ca.nlpsol("greybox", "ipopt", {"x": z, "f": 0.5 * ca.sumsqr(r)}, options)
     big = 1e19  # IPOPT's infinity
     sol = solver(x0=z0, lbx=np.clip(lower, -big, big), ubx=np.clip(upper, -big, big))
     z_end = np.asarray(sol["x"]).ravel()
