@@ -153,3 +153,12 @@ def test_export_of_a_json_that_is_not_a_fit_is_one_line(tmp_path, capsys):
     bogus.write_text(json.dumps({"format": "something"}))
     assert main(["export", str(bogus), "-o", str(tmp_path / "x.fmu")]) == 2
     assert "is not a grey-box fit" in capsys.readouterr().err and not (tmp_path / "x.fmu").exists()
+
+
+def test_a_bound_holds_the_estimate_and_is_reported(data):
+    fit = fit_greybox(slider_system(), data[0], FitConfig(free=("d",), bounds={"d": (2.5, 4.0)}, start={"d": 3.0},
+                                                          window=300, max_evaluations=30))
+    row = fit.report["parameters"]["d"]
+    assert 2.5 <= row["value"] < 2.5 + 1e-6 and row["at_bound"] and (row["min"], row["max"]) == (2.5, 4.0)
+    d = next(v for v in fit.system.parameters if v.name == "d")
+    assert (d.min, d.max) == (2.5, 4.0)

@@ -225,7 +225,8 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
     parameters = {}
     for j, name in enumerate(unknowns.names):
         v = system.parameters[unknowns.index[j]]
-        at_bound = bool(np.isclose(theta[j], unknowns.lower[j]) or np.isclose(theta[j], unknowns.upper[j]))
+        near = 1e-6 * problem.theta_scale[j]  # relative to the parameter's size: C_max is 6e-10 m3/(s.Pa)
+        at_bound = bool(min(abs(theta[j] - unknowns.lower[j]), abs(theta[j] - unknowns.upper[j])) <= near)
         parameters[name] = {"value": float(theta[j]), "unit": v.unit, "std_error": float(errors[j]),
                             "start": float(unknowns.start[j]), "min": _finite(unknowns.lower[j]),
                             "max": _finite(unknowns.upper[j]), "at_bound": at_bound, "description": v.description}
