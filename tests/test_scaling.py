@@ -77,8 +77,8 @@ def test_a_hybrid_with_compiled_physics_is_refused_on_a_gpu_in_one_line():
 
     from nnfmu.training.trainer import _check_device
 
-    hybrid = SimpleNamespace(config=SimpleNamespace(physics_backend="compiled"))
+    hybrid = SimpleNamespace(config=SimpleNamespace(arch="hybrid", physics_backend="compiled"))
     with pytest.raises(ConfigError, match="compiled physics runs on the CPU only.*--physics-backend sx"):
         _check_device(hybrid, torch.device("cuda"))
     _check_device(hybrid, torch.device("cpu"))
-    _check_device(SimpleNamespace(config=SimpleNamespace(physics_backend="sx")), torch.device("cuda"))
+    _check_device(SimpleNamespace(config=SimpleNamespace(arch="hybrid", physics_backend="sx")), torch.device("cuda"))

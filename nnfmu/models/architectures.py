@@ -37,6 +37,7 @@ from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 from nnfmu.errors import ConfigError
+from nnfmu.identifiers import is_c_identifier
 
 __all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "architecture", "config_class",
            "load_plugins", "model_class", "names", "records", "register_architecture", "registered", "resolve",
@@ -163,8 +164,9 @@ class Architecture:
     check_device: Ref | None = None
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.name, str) and self.name.isascii() and self.name.isidentifier()):
-            raise ConfigError(f"an architecture's name must be a plain ASCII identifier, got {self.name!r}")
+        if not is_c_identifier(self.name):
+            raise ConfigError(f"an architecture's name must be a C identifier (ASCII letters, digits, _), "
+                              f"got {self.name!r}")
         if (self.casadi_step is None) != (self.casadi_init is None):
             raise ConfigError(f"architecture {self.name!r}: give casadi_step and casadi_init together")
         if (self.to_casadi is None) != (self.casadi_model is None):
