@@ -22,8 +22,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/nnfmu demo
 
+# two workers (pytest-xdist): the suite's modules split over the two cores of the CI machine
+TEST_WORKERS ?= 2
+
 test: setup cross-toolchain
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 # What the FMU tests run binaries with: Wine (the Windows DLL), QEMU user mode (qemu-aarch64 for the ARM64
 # library, with Debian's aarch64 C library; qemu-x86_64 for an x86-64 CPU without AVX) - Debian packages,

@@ -2,7 +2,29 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+#: Modules that start Ray (a local instance or a loopback cluster): one at a time, on one worker.
+RAY_MODULES = {"test_cluster.py", "test_time_search.py", "test_tune.py", "test_tune_search.py"}
+
+
+def pytest_configure(config):
+    """Under pytest-xdist (``make test`` runs two workers on two cores), torch takes one thread per worker:
+    two workers of two threads each would fight over the cores."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import torch
+
+        torch.set_num_threads(1)
+
+
+def pytest_collection_modifyitems(config, items):
+    """``--dist loadgroup``: each module runs whole on one worker (its module fixtures are built once), and
+    the modules that start Ray share one group, so that two Ray instances never compete for the two cores."""
+    for item in items:
+        name = item.path.name
+        item.add_marker(pytest.mark.xdist_group("ray" if name in RAY_MODULES else name))
 
 
 @pytest.fixture(scope="session")
