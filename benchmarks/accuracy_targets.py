@@ -26,7 +26,7 @@ import torch
 
 from nnfmu.data import load_dataset
 from nnfmu.study import get_budget
-from nnfmu.study.steps import prepare_data
+from nnfmu.study.cell_work import prepare_data
 
 
 def _cpu_seconds() -> float:

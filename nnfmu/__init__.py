@@ -57,7 +57,7 @@ _LAZY = {
     "LinearModel": "nnfmu.linear",
     "load_linear": "nnfmu.linear",
     "evaluate": "nnfmu.cosim",
-    "casadi_model": "nnfmu.export.networks",
+    "casadi_model": "nnfmu.export.torch_to_casadi",
     "build_fmu": "nnfmu.export.fmu",
     "reproduce": "nnfmu.study",
     "run_demo": "nnfmu.study",

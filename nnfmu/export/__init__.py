@@ -6,7 +6,7 @@
 
 ``python -m nnfmu.export model.pt -o model.fmu`` is the command line.
 Names are imported on first use so that ``import nnfmu.export`` does not import torch.
-(The torch part lives in :mod:`nnfmu.export.networks`: a submodule named ``to_casadi`` would
+(The torch part lives in :mod:`nnfmu.export.torch_to_casadi`: a submodule named ``to_casadi`` would
 shadow the function of that name once imported.)
 """
 
@@ -15,8 +15,8 @@ from __future__ import annotations
 from nnfmu._lazy import lazy_exports
 
 _LAZY = {
-    "to_casadi": "nnfmu.export.networks",
-    "casadi_model": "nnfmu.export.networks",
+    "to_casadi": "nnfmu.export.torch_to_casadi",
+    "casadi_model": "nnfmu.export.torch_to_casadi",
     "build_fmu": "nnfmu.export.fmu",
     "BuildOptions": "nnfmu.export.fmu",
 }

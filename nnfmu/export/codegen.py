@@ -41,7 +41,7 @@ import casadi as ca
 
 from nnfmu.errors import ConfigError, FmuBuildError
 from nnfmu.export import panels
-from nnfmu.export import single as single_precision
+from nnfmu.export import float32 as single_precision
 from nnfmu.system import CasadiModel
 
 MODEL_C = "model_casadi.c"

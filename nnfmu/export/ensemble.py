@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from nnfmu.export import casadi_nets as nets
+from nnfmu.export import casadi_layers as nets
 from nnfmu.models import EnsembleStepModel
 from nnfmu.models.linear_path import y_slot
 

@@ -9,7 +9,7 @@
         y_next = physics.output(x_next, p)
 
 ``delta`` is the correction network written with the dense-constant MX layers of
-:mod:`nnfmu.export.casadi_nets`, in the torch model's order of operations. The physical
+:mod:`nnfmu.export.casadi_layers`, in the torch model's order of operations. The physical
 parameters ``p`` are a port, so :func:`hybrid_casadi_model` exposes them as tunable FMU
 parameters whose start values are the trained ones. :func:`nnfmu.export.to_casadi` and
 :func:`nnfmu.export.casadi_model` call these for a :class:`~nnfmu.hybrid.HybridStepModel`.
@@ -25,7 +25,7 @@ import torch
 from torch import nn
 
 from nnfmu.errors import ExportError
-from nnfmu.export import casadi_nets as nets
+from nnfmu.export import casadi_layers as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
 from nnfmu.identifiers import to_c_identifier
 from nnfmu.physics import rk4_step

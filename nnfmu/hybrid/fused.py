@@ -36,7 +36,7 @@ import torch
 from torch import nn
 
 from nnfmu.errors import FmuBuildError
-from nnfmu.export.casadi_nets import ACTIVATIONS, activation_expr
+from nnfmu.export.casadi_layers import ACTIVATIONS, activation_expr
 from nnfmu.hybrid.compiled_torch import CompiledFunction
 from nnfmu.physics import rk4_step
 from nnfmu.physics.rk4 import physics_step

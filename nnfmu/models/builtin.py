@@ -1,7 +1,7 @@
 """The records of the five networks (MLP, RNN, LSTM, GRU, TCN): :mod:`nnfmu.models.architectures`.
 
 Their config is :class:`~nnfmu.models.ModelConfig`; their CasADi step and init are in
-:mod:`nnfmu.export.networks` and :mod:`nnfmu.export.init_window`, named lazily so that
+:mod:`nnfmu.export.torch_to_casadi` and :mod:`nnfmu.export.init_window`, named lazily so that
 ``models`` imports nothing above it. The recurrent ones run their free run as compiled C
 (:mod:`nnfmu.training.compiled_rollout`). ``search_rank``: the order in which ``nnfmu train
 --max-minutes`` tries them; ``grid``: the depths of the paper-size tune grid.
@@ -12,7 +12,7 @@ from __future__ import annotations
 from nnfmu.models.architectures import Architecture, register_architecture
 
 _CONFIG = "nnfmu.models.config:ModelConfig"
-_STEP = "nnfmu.export.networks:"
+_STEP = "nnfmu.export.torch_to_casadi:"
 _INIT = "nnfmu.export.init_window:"
 
 for _record in (

@@ -24,7 +24,7 @@ from typing import Callable
 
 from nnfmu.atomic import write_text_atomic
 from nnfmu.errors import ConfigError, DataFileError
-from nnfmu.study import steps
+from nnfmu.study import cell_work
 from nnfmu.study import parallel
 from nnfmu.study.budgets import SYSTEMS, Budget, Hyper, get_budget, network_name
 from nnfmu.study.cells import Cell, CellLog, run_cells
@@ -113,7 +113,7 @@ class Study:
     def cells(self) -> list[Cell]:
         data = self.data_dir
         src = () if self.source is None or self.source.is_dir() else (self.source,)
-        cells = [Cell("data", (data,), src, lambda: steps.prepare_data(
+        cells = [Cell("data", (data,), src, lambda: cell_work.prepare_data(
             self.system, self.budget, self.seed, self.source, data, self.progress), where="driver")]
         for arch, strategy in self.networks:
             cells += self._network_cells(arch, strategy)
@@ -121,15 +121,15 @@ class Study:
             self.path("fmus", "physics")
         cells += [
             Cell("identify linear baseline", (lin_json,), (data,),
-                 lambda: steps.identify_baseline(data, dict(self.budget.linear), lin_json, self.progress)),
+                 lambda: cell_work.identify_baseline(data, dict(self.budget.linear), lin_json, self.progress)),
             Cell("export linear baseline", (lin_fmu,), (lin_json,),
-                 lambda: steps.export_linear(lin_json, lin_fmu, self.fmu_name("linear"))),
-            Cell("export physics model", (phys_fmu,), (), lambda: steps.export_physics(self.system, phys_fmu)),
+                 lambda: cell_work.export_linear(lin_json, lin_fmu, self.fmu_name("linear"))),
+            Cell("export physics model", (phys_fmu,), (), lambda: cell_work.export_physics(self.system, phys_fmu)),
         ]
         for name in [network_name(a, s) for a, s in self.networks] + self.baselines:
             fmu, scores = self.path("fmus", name), self.path("scores", name)
             cells.append(Cell(f"score {name}", (scores,), (fmu, data),
-                              lambda fmu=fmu, scores=scores: steps.score_fmu(fmu, data, scores)))
+                              lambda fmu=fmu, scores=scores: cell_work.score_fmu(fmu, data, scores)))
         return cells + [self._report_cell()]
 
     def _network_cells(self, arch: str, strategy: str) -> list[Cell]:
@@ -142,12 +142,12 @@ class Study:
                               lambda: self._tune(arch, strategy, tuned), where="driver"))
         cells += [
             Cell(f"train {arch} {strategy}", (ckpt,), inputs,
-                 lambda: steps.train_network(self.data_dir, arch, strategy, self.hyper(arch, strategy),
+                 lambda: cell_work.train_network(self.data_dir, arch, strategy, self.hyper(arch, strategy),
                                              self.budget, self.seed, ckpt, inputs, self.progress,
                                              self._epoch_callback(name), self.device, self.threads),
-                 done=lambda: steps.training_finished(ckpt)),
+                 done=lambda: cell_work.training_finished(ckpt)),
             Cell(f"export {arch} {strategy}", (fmu,), (ckpt,),
-                 lambda: steps.export_network(ckpt, fmu, self.fmu_name(name))),
+                 lambda: cell_work.export_network(ckpt, fmu, self.fmu_name(name))),
         ]
         return cells
 
@@ -217,7 +217,7 @@ class Study:
             from nnfmu.study.tune import require_ray
 
             require_ray()  # a missing extra is said before any work, not after the data are made
-        steps.check_source(self.system, self.source, self.data_dir)  # bad --data: say so and leave the folder alone
+        cell_work.check_source(self.system, self.source, self.data_dir)  # bad --data: say so and leave the folder alone
         from nnfmu.training.resources import check_threads, device_name, resolve_device
 
         check_threads(self.threads)

@@ -16,7 +16,7 @@ import numpy as np
 from nnfmu.cosim import Evaluation
 from nnfmu.data import Dataset, load_dataset
 from nnfmu.metrics import nrmse
-from nnfmu.study import steps
+from nnfmu.study import cell_work
 from nnfmu.study.budgets import network_name
 from nnfmu.study.report_md import render_markdown
 from nnfmu.training import STRATEGIES
@@ -30,7 +30,7 @@ def _clean(x):
 
 
 def _score(ds: Dataset, study, name: str, label: str) -> tuple[dict, Evaluation | None]:
-    preds, error = steps.load_scores(study.path("scores", name))
+    preds, error = cell_work.load_scores(study.path("scores", name))
     entry = {"nrmse": None, "per_output": None, "per_trajectory": None, "error": error or None}
     if error:
         return entry, None
@@ -49,7 +49,7 @@ def _network(ds: Dataset, study, arch: str, strategy: str) -> tuple[dict, Evalua
     summary = ckpt.get("summary") or {}
     label = f"{STRATEGY_PREFIX[strategy]}-{arch.upper()}"
     entry, evaluation = _score(ds, study, name, label)
-    failed = steps.error_file(ckpt_path)
+    failed = cell_work.error_file(ckpt_path)
     seeds = summary.get("seeds") or []
     per_seed = (lambda key: ", ".join(str(r.get(key)) for r in seeds)) if seeds else None
     training = {"epochs_run": per_seed("epochs_run") if seeds else summary.get("epochs_run"),
@@ -162,8 +162,8 @@ def write_results(study) -> str:
     """Write ``results.json``, ``results.md`` and the figures; returns a one-line summary."""
     doc, _ = collect(study)
     md = render_markdown(doc)
-    steps.write_json(study.out / "results.json", doc)
-    steps.write_text_atomic(study.out / "results.md", md)
+    cell_work.write_json(study.out / "results.json", doc)
+    cell_work.write_text_atomic(study.out / "results.md", md)
     parts = []
     for strategy in STRATEGIES:
         name = doc["best"][strategy]

@@ -29,7 +29,7 @@ def supported_names() -> str:
 
 def unsupported(where: str, module: nn.Module) -> ExportError:
     return ExportError(f"layer {where!r} ({type(module).__name__}) cannot be exported to CasADi; "
-                       f"supported layers are: {supported_names()}. Replace it, or extend nnfmu.export.casadi_nets")
+                       f"supported layers are: {supported_names()}. Replace it, or extend nnfmu.export.casadi_layers")
 
 
 def dm(t: torch.Tensor) -> ca.DM:

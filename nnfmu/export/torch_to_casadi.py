@@ -11,7 +11,7 @@ vector documented in :mod:`nnfmu.models.recurrent`, :mod:`nnfmu.models.window`
 (the MLP) and :mod:`nnfmu.models.tcn_state` (the TCN's delay lines: a step
 computes one new column per layer), so ``CasadiModel.simulate`` equals
 ``model.simulate`` (to about 1e-15 per step in float64). The graphs are MX
-with the weights as dense constants (see :mod:`nnfmu.export.casadi_nets`).
+with the weights as dense constants (see :mod:`nnfmu.export.casadi_layers`).
 Every export is checked numerically against the torch step; a model whose
 computation ``to_casadi`` does not know raises :class:`~nnfmu.errors.ExportError`.
 """
@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from nnfmu.errors import ExportError
-from nnfmu.export import casadi_nets as nets
+from nnfmu.export import casadi_layers as nets
 from nnfmu.export.ensemble import ensemble_to_casadi, with_y
 from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.identifiers import to_c_identifier
