@@ -148,7 +148,8 @@ def train_tsfast(arrays, work: Path, budget: Budget) -> tuple[np.ndarray, int, d
     learner = RNNLearner(dls, rnn_type="gru", hidden_size=HIDDEN, num_layers=1, n_skip=INIT, show_bar=False,
                          device=torch.device("cpu"))
     epochs = _epochs_until_spent(learner, budget)
-    info = {"learner": "RNNLearner", "win_sz": win, "bs": bs, "epochs": epochs, "cpu_s": budget.spent()[0], "wall_s": budget.spent()[1]}
+    info = {"learner": "RNNLearner", "win_sz": win, "bs": bs, "epochs": epochs, "cpu_s": budget.spent()[0],
+            "wall_s": budget.spent()[1]}
     learner.model.eval()
     preds = []
     with torch.no_grad():
