@@ -112,7 +112,7 @@ class HybridConfig(ModelConfig):
     physics_backend: str = "compiled"
 
     def __post_init__(self) -> None:
-        if self.arch != "hybrid":
+        if type(self) is HybridConfig and self.arch != HYBRID_ARCH:  # a subclass checks its own arch
             raise ConfigError(f"HybridConfig has arch 'hybrid', got {self.arch!r}; use ModelConfig for networks")
         system = self._resolve_physics()
         for name, valid in (("correction", CORRECTIONS), ("physics_backend", BACKENDS)):

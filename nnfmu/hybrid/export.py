@@ -125,7 +125,7 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
         parameters=model.physics_variables(),
         description=f"hybrid model exported by nnfmu: {model.physics.description} + neural correction "
                     f"({model.config.correction})",
-        source={"kind": "nnfmu-hybrid", "arch": "hybrid", "model_config": model.config.to_dict(),
+        source={"kind": "nnfmu-hybrid", "arch": model.config.arch, "model_config": model.config.to_dict(),
                 "physics_parameters": model.physics_parameter_values(), "checkpoint": prov.get("checkpoint"),
                 "best_epoch": prov.get("best_epoch"), "summary": prov.get("summary", {}),
                 "dataset_source": prov.get("dataset_source", meta.get("source", {}))},

@@ -126,7 +126,7 @@ class HybridStepModel(StepModel):
             raise ShapeError(f"expected a HybridConfig, got {type(config).__name__}")
         system = config.system()
         super().__init__(config, physics_meta(system) if meta is None else meta)
-        _check_units(self.meta, system)
+        self._check_units(system)
         self.Ts = float(self.meta["Ts"])
         self.n_sub = config.n_sub or max(1, math.ceil(system.n_sub * self.Ts / system.Ts - 1e-9))
         self._bridge = physics_bridge(config.physics_key(), config.physics_backend, self.Ts, self.n_sub,
@@ -145,6 +145,10 @@ class HybridStepModel(StepModel):
         self.physics_log_scale = nn.Parameter(torch.zeros(len(config.train_physics)))
         self.correction = _correction_mlp(config, system.n_x, len(config.corrected_states))
         self._check_sizes()
+
+    def _check_units(self, system: PhysicsSystem) -> None:
+        """Refuse data whose channels' units differ from the physics' (a subclass may generate its physics)."""
+        _check_units(self.meta, system)
 
     def _apply(self, fn, recurse=True):
         """``.to(device)`` moves the float64 constants too (their dtype stays float64, see ``__init__``)."""

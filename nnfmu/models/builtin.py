@@ -31,3 +31,5 @@ for _record in (
                  search_rank=2),
 ):
     register_architecture(_record)
+
+import nnfmu.node  # noqa: E402,F401  (the neural ODE, a hybrid with no physics, registers itself)

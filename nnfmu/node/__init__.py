@@ -1,0 +1,52 @@
+"""The neural ODE: a continuous-time neural state-space model with no physics, as the degenerate hybrid.
+
+::
+
+    xdot = N(x, u) / (time_scale * Ts)       x: n_states latent states in output-normalised units
+    y    = y_mean + y_std * x[:n_y]          the first n_y states are the outputs, the others are latent
+    x0   = [(y0 - y_mean) / y_std, 0, ..., 0]
+
+It is a :class:`~nnfmu.hybrid.HybridStepModel` whose physics (:func:`nnfmu.node.config.node_physics`) is a
+generated zero ODE, so the hybrid's derivative correction on every state *is* the whole model: training
+(the free run), checkpoints, scoring and export (an FMU with co-simulation, Model Exchange and directional
+derivatives) are the hybrid's. ``nnfmu train --arch node [--states N] [--time-scale SAMPLES]``.
+
+This module registers the record only (no torch, no CasADi); the code is imported on first use.
+"""
+
+import nnfmu.hybrid  # noqa: F401  (registered first: the options both take appear under the hybrid's name)
+from nnfmu.limits import MAX_RK4_SUBSTEPS
+from nnfmu.models.architectures import Architecture, Option, register_architecture
+
+NODE_ARCH = "node"
+
+__all__ = ["NODE_ARCH"]
+
+register_architecture(Architecture(
+    name=NODE_ARCH,
+    config_class="nnfmu.node.config:NodeConfig",
+    model_class="nnfmu.node.model:NodeStepModel",
+    summary="a neural ODE with no physics (xdot = N(x, u), y = x[:n_y]); an FMU with Model Exchange",
+    to_casadi="nnfmu.hybrid.export:hybrid_to_casadi",
+    casadi_model="nnfmu.hybrid.export:hybrid_casadi_model",
+    options=(
+        Option(flag="--states", field="n_states", type="int", metavar="N", bounds=(1, None),
+               help="states of the neural ODE, at least the outputs' number (default: max(2 n_y, 4)); the "
+                    "first n_y are the outputs, the others latent"),
+        Option(flag="--time-scale", field="time_scale", type="float", metavar="SAMPLES", bounds=(0, None),
+               open_bounds=(True, False),
+               help="sample times in which the network's unit output moves a state by one output standard "
+                    "deviation: xdot = N(x, u) / (SAMPLES * Ts) (default 10)"),
+        Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
+               help="RK4 sub-steps per sample (default: the physics' own)"),
+        Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
+               help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
+                    "needed)"),
+    ),
+    data_plan=False,
+    linear_path=False,
+    strategies=("parallel",),
+    dtype="float64",
+    counting_config="nnfmu.hybrid:_counting_config",
+    check_device="nnfmu.hybrid:_check_device",
+))

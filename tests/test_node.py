@@ -1,0 +1,168 @@
+"""The neural ODE (``--arch node``): a hybrid with no physics, trained by the free run, exported with Model Exchange.
+
+- the generated physics is a zero ODE whose output is the first states in the data's units: an untrained node
+  holds its first output, and its initial state is the measured output, normalised;
+- ``nnfmu train --arch node`` trains it (validation free-run NRMSE falls) and writes a checkpoint that
+  ``nnfmu export`` turns into an FMU that fmpy validates; the FMU's co-simulation is the torch free run (1e-10),
+  Model Exchange with CVode follows co-simulation, and its directional derivatives are finite differences;
+- bad sizes get one line and status 2, and nothing is written.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fmpy.validation import validate_fmu
+from test_fmu_model_exchange import MeInstance
+
+from nnfmu.cli import main
+from nnfmu.cosim import FmuSimulator
+from nnfmu.data import Channel, Dataset, Trajectories, save_dataset
+from nnfmu.errors import ShapeError
+from nnfmu.hybrid import HybridStepModel
+from nnfmu.models import build_model, load_checkpoint, load_model
+from nnfmu.node.config import NodeConfig, node_physics
+from nnfmu.physics import slider_system
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    """The slider (Stribeck friction) under piecewise-constant forces: 6 x 120 train, 2 valid, 1 test (Ts 10 ms)."""
+    truth, rng = slider_system(), np.random.default_rng(1)
+
+    def split(n_traj: int, n: int = 120) -> Trajectories:
+        us, ys = [], []
+        for _ in range(n_traj):
+            u = np.repeat(rng.uniform(-6.0, 6.0, size=(n // 10 + 1, 1)), 10, axis=0)[:n]
+            us.append(u)
+            ys.append(truth.simulate_states(np.array([rng.uniform(-0.1, 0.1), 0.0]), u[:-1])[:, :1])
+        return Trajectories(tuple(us), tuple(ys))
+
+    ds = Dataset(Ts=0.01, inputs=(Channel("F", "N"),), outputs=(Channel("pos", "m"),),
+                 splits={"train": split(6), "valid": split(2), "test": split(1)})
+    return ds, save_dataset(ds, tmp_path_factory.mktemp("slider_data") / "slider")
+
+
+def _relative(got: np.ndarray, want: np.ndarray) -> float:
+    return float(np.max(np.abs(got - want)) / np.ptp(want))
+
+
+def test_the_generated_physics_is_a_zero_ode_read_out_in_the_datas_units():
+    system = node_physics(5, 2, 2)
+    assert [v.name for v in system.states] == ["x1", "x2", "x3", "x4", "x5"]
+    assert [v.name for v in system.parameters] == ["y1_mean", "y2_mean", "y1_std", "y2_std"]
+    p = [1.0, -2.0, 0.5, 4.0]
+    x0 = np.asarray(system.init_state([2.0, 6.0], [0.3, 0.1], p)).ravel()
+    np.testing.assert_allclose(x0, [2.0, 2.0, 0.0, 0.0, 0.0])  # (y0 - mean) / std, the latent states 0
+    np.testing.assert_allclose(np.asarray(system.output(x0, p)).ravel(), [2.0, 6.0])
+    assert not np.asarray(system.ode(x0 + 1.0, [0.3, 0.1], p)).any()
+
+
+def test_an_untrained_node_holds_its_first_output_and_its_config_round_trips(data):
+    ds, _ = data
+    config = NodeConfig(n_u=1, n_y=1, hidden=8)
+    assert (config.n_states, config.train_physics, config.corrected_states) == (4, (), ("x1", "x2", "x3", "x4"))
+    assert NodeConfig.from_dict(config.to_dict()) == config
+    model = build_model(config, ds.meta(), norm=ds.norm_stats("train")).double()
+    assert isinstance(model, HybridStepModel) and model.n_x == 4
+    u, y = ds.test.u[0], ds.test.y[0]
+    np.testing.assert_array_equal(model.simulate(u, y[0]), np.repeat(y[:1], len(u), axis=0))
+    with pytest.raises(ShapeError, match="at least one state per output"):
+        NodeConfig(n_u=1, n_y=3, n_states=2)
+
+
+@pytest.fixture(scope="module")
+def trained(data, tmp_path_factory):
+    """``nnfmu train --arch node --states 3`` for 3 epochs, then ``nnfmu export`` (FMI 3)."""
+    out = tmp_path_factory.mktemp("node") / "node.pt"
+    assert main(["train", "--data", str(data[1]), "--arch", "node", "--states", "3", "--hidden", "8",
+                 "--epochs", "3", "--truncate", "40", "--batch-size", "3", "--quiet", "-o", str(out)]) == 0
+    fmu = out.with_suffix(".fmu")
+    assert main(["export", str(out), "-o", str(fmu), "--fmi-version", "3"]) == 0
+    return load_checkpoint(out), out, fmu
+
+
+def test_the_cli_trains_it_by_the_free_run(trained):
+    ckpt, path, _ = trained
+    history = ckpt["history"]
+    assert ckpt["model_config"]["arch"] == "node" and ckpt["model_config"]["n_states"] == 3
+    assert ckpt["best_epoch"] > 0 and history[ckpt["best_epoch"]]["valid_nrmse"] < history[0]["valid_nrmse"]
+    assert load_model(path).n_x == 3
+
+
+def test_the_fmu_validates_and_co_simulates_as_the_torch_free_run(trained, data):
+    _, path, fmu = trained
+    assert validate_fmu(str(fmu)) == []
+    ds = data[0]
+    model = load_model(path).double()
+    u, y = np.concatenate(ds.test.u + ds.valid.u), ds.test.y[0]
+    with FmuSimulator(fmu, ds.input_names, ds.output_names, ds.Ts) as sim:
+        got = sim.simulate(u, y[0])
+    want = model.simulate(u, y[0])
+    assert np.ptp(want) > 0.01 and _relative(got, want) < 1e-10
+
+
+def test_model_exchange_with_cvode_follows_co_simulation(trained, data):
+    import fmpy
+
+    ds, fmu = data[0], trained[2]
+    u, y0 = ds.test.u[0], ds.test.y[0][0]
+    t = np.arange(len(u)) * ds.Ts
+    steps = [(t[k], u[k - 1, 0]) for k in range(1, len(u)) if u[k, 0] != u[k - 1, 0]]  # held: a step, no ramp
+    signal = np.array(sorted(steps + list(zip(t, u[:, 0])), key=lambda row: row[0]),
+                      dtype=[("time", float), ("F", float)])
+    runs = {}
+    for kind, options in (("CoSimulation", {}), ("ModelExchange", {"solver": "CVode", "relative_tolerance": 1e-10})):
+        result = fmpy.simulate_fmu(str(fmu), fmi_type=kind, stop_time=t[-1], output_interval=ds.Ts,
+                                   input=signal, start_values={"pos_start": float(y0[0])}, **options)
+        rows = [np.flatnonzero(np.abs(result["time"] - t_k) < 1e-6 * ds.Ts)[-1] for t_k in t]  # not the events'
+        runs[kind] = result["pos"][rows]
+    assert np.ptp(runs["CoSimulation"]) > 0.01
+    # CVode integrates the node's ODE at its own steps; co-simulation is one RK4 step per 10 ms sample
+    assert _relative(runs["ModelExchange"], runs["CoSimulation"]) < 1e-5
+
+
+def test_its_directional_derivatives_are_finite_differences(trained):
+    me = MeInstance(trained[2], {"pos_start": 0.05})
+    me.set({"F": 2.0})
+    x = me.states_now() + np.array([0.3, -0.5, 0.2])
+    me.set_states(x)
+    unknowns, knowns = [f"der({s})" for s in me.states] + ["pos"], [*me.states, "F"]
+    jacobian = me.jacobian(unknowns, knowns)
+    point = np.concatenate([x, [2.0]])
+
+    def unknowns_at(z):
+        me.set_states(z[:3])
+        me.set({"F": z[3]})
+        return me.get(unknowns)
+
+    fd = np.zeros_like(jacobian)
+    for j in range(point.size):
+        h = 1e-6 * max(abs(point[j]), 1e-3)
+        plus, minus = point.copy(), point.copy()
+        plus[j] += h
+        minus[j] -= h
+        fd[:, j] = (unknowns_at(plus) - unknowns_at(minus)) / (2 * h)
+    np.testing.assert_array_less(np.abs(jacobian - fd) / np.abs(jacobian).max(axis=1, keepdims=True), 1e-6)
+    assert np.count_nonzero(jacobian[:3]) >= 9  # the network couples every state and the input
+    me.fmu.terminate()
+    me.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("bad, says", [(["--states", "0"], "--states must be a whole number >= 1"),
+                                        (["--physics", "slider"], "--physics only apply to --arch hybrid")])
+def test_bad_options_are_one_line_status_2_and_no_file(bad, says, data, tmp_path, capsys):
+    out = tmp_path / "bad.pt"
+    assert main(["train", "--data", str(data[1]), "--arch", "node", *bad, "--epochs", "1", "-o", str(out)]) == 2
+    assert not out.exists() and not list(tmp_path.iterdir())
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1
+
+
+def test_its_options_are_listed_under_its_name(capsys):
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--arch node: a neural ODE with no physics" in text and "--states N" in text and "--time-scale" in text
