@@ -148,7 +148,7 @@ def _run_starts(system, problem, windows, unknowns, config, progress):
     bar = tqdm(total=len(points), disable=not progress, unit="start", desc=f"fit {system.name}", dynamic_ncols=True)
     with bar:
         for k, theta in enumerate(points):
-            p = unknowns_p(problem, theta)
+            p = _parameters_at(problem, theta)
             z0 = problem.pack(theta, _initial_states(system, windows, p))
             if not np.isfinite(problem.evaluate(z0)).all():
                 if k == 0:
@@ -172,7 +172,7 @@ def _run_starts(system, problem, windows, unknowns, config, progress):
     return best, runs
 
 
-def unknowns_p(problem, theta: np.ndarray) -> np.ndarray:
+def _parameters_at(problem, theta: np.ndarray) -> np.ndarray:
     """The full parameter vector with the free ones at ``theta`` (physical units)."""
     p = problem.p_fixed.copy()
     p[problem.free] = theta
