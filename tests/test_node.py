@@ -21,7 +21,8 @@ from nnfmu.data import Channel, Dataset, Trajectories, save_dataset
 from nnfmu.errors import ShapeError
 from nnfmu.hybrid import HybridStepModel
 from nnfmu.models import build_model, load_checkpoint, load_model
-from nnfmu.node.config import NodeConfig, node_physics
+from nnfmu.export import casadi_model
+from nnfmu.node import NodeConfig, node_physics
 from nnfmu.physics import slider_system
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -102,6 +103,9 @@ def test_the_fmu_validates_and_co_simulates_as_the_torch_free_run(trained, data)
         got = sim.simulate(u, y[0])
     want = model.simulate(u, y[0])
     assert np.ptp(want) > 0.01 and _relative(got, want) < 1e-10
+    spec = casadi_model(model).spec  # what the FMU declares: the node's own name, its offsets in the data's units
+    assert spec.source["arch"] == "node"
+    assert [(v.name, v.unit) for v in spec.parameters] == [("y1_mean", "m"), ("y1_std", "m")]
 
 
 def test_model_exchange_with_cvode_follows_co_simulation(trained, data):

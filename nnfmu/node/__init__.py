@@ -14,13 +14,24 @@ derivatives) are the hybrid's. ``nnfmu train --arch node [--states N] [--time-sc
 This module registers the record only (no torch, no CasADi); the code is imported on first use.
 """
 
+from typing import TYPE_CHECKING
+
 import nnfmu.hybrid  # noqa: F401  (registered first: the options both take appear under the hybrid's name)
+from nnfmu._lazy import lazy_exports
 from nnfmu.limits import MAX_RK4_SUBSTEPS
 from nnfmu.models.architectures import Architecture, Option, register_architecture
 
 NODE_ARCH = "node"
 
-__all__ = ["NODE_ARCH"]
+_LAZY = {"NodeConfig": "nnfmu.node.config", "node_physics": "nnfmu.node.config", "NodeStepModel": "nnfmu.node.model"}
+
+if TYPE_CHECKING:  # what _LAZY imports on first use
+    from nnfmu.node.config import NodeConfig, node_physics
+    from nnfmu.node.model import NodeStepModel
+
+__all__ = ["NODE_ARCH", "NodeConfig", "NodeStepModel", "node_physics"]
+
+__getattr__, __dir__ = lazy_exports("nnfmu.node", globals(), _LAZY)
 
 register_architecture(Architecture(
     name=NODE_ARCH,
