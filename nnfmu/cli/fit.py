@@ -40,8 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="starting points: the given start, then N-1 random ones inside the bounds (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random starting points (default 0)")
     p.add_argument("--solver", choices=["trf", "ipopt"], default="trf",
-                   help="trf (default): SciPy's trust-region least squares on CasADi's exact Jacobian; ipopt: "
-                        "CasADi's IPOPT with the exact Hessian (slower here; docs/greybox.md)")
+                   help="trf (default): SciPy's trust-region least squares on the exact Jacobian; ipopt: CasADi's "
+                        "IPOPT with the same Gauss-Newton Hessian (slower on the slider and the valve; "
+                        "docs/greybox.md)")
     p.add_argument("--max-evaluations", type=int, default=100, metavar="N",
                    help="residual evaluations (trf) or iterations (ipopt) per start (default 100)")
     p.add_argument("--n-sub", type=int, metavar="N", help="RK4 sub-steps per sample (default: the model's own)")
