@@ -112,6 +112,7 @@ def test_several_starts_are_each_reported_and_the_best_is_kept(data):
     runs = fit.report["starts"]
     assert len(runs) == 3 and runs[0]["start"] == {"d": 2.0} and runs[1]["start"] != runs[2]["start"]
     assert fit.report["cost"] == min(r["cost"] for r in runs)
+    assert any("limit of 20 evaluations" in note for run in runs for note in run["notes"])
 
 
 def test_a_diverged_evaluation_keeps_the_best_finite_point():

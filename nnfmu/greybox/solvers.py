@@ -125,6 +125,10 @@ def solve(problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray, *, solv
     with threadpool_limits(1):  # one BLAS thread: ten times faster than two on this problem's small SVDs
         status = (_trf if solver == "trf" else _ipopt)(problem, z0, lower, upper, max_evaluations, tracker)
     notes = []
+    if "maximum number" in status.lower() or status == "Maximum_Iterations_Exceeded":
+        notes.append(f"the {solver} solver stopped at its limit of {max_evaluations} "
+                     f"{'evaluations' if solver == 'trf' else 'iterations'} before converging; raise "
+                     "--max-evaluations (or FitConfig.max_evaluations) to go on")
     if tracker.non_finite:
         notes.append(f"{tracker.non_finite} of {tracker.evaluations} evaluations gave NaN or Inf (the free run "
                      "diverged there); the best finite point is kept")
