@@ -10,6 +10,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
@@ -77,16 +80,19 @@ def test_an_untrained_node_holds_its_first_output_and_its_config_round_trips(dat
 @pytest.fixture(scope="module")
 def trained(data, tmp_path_factory):
     """``nnfmu train --arch node --states 3`` for 3 epochs, then ``nnfmu export`` (FMI 3)."""
-    out = tmp_path_factory.mktemp("node") / "node.pt"
-    assert main(["train", "--data", str(data[1]), "--arch", "node", "--states", "3", "--hidden", "8",
-                 "--epochs", "3", "--truncate", "40", "--batch-size", "3", "--quiet", "-o", str(out)]) == 0
+    out, printed = tmp_path_factory.mktemp("node") / "node.pt", io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert main(["train", "--data", str(data[1]), "--arch", "node", "--states", "3", "--hidden", "8",
+                     "--epochs", "3", "--truncate", "40", "--quiet", "-o", str(out)]) == 0
     fmu = out.with_suffix(".fmu")
     assert main(["export", str(out), "-o", str(fmu), "--fmi-version", "3"]) == 0
-    return load_checkpoint(out), out, fmu
+    return load_checkpoint(out), out, fmu, printed.getvalue()
 
 
-def test_the_cli_trains_it_by_the_free_run(trained):
-    ckpt, path, _ = trained
+def test_the_cli_trains_it_by_the_free_run_with_the_batch_planned_from_the_data(trained):
+    ckpt, path, _, printed = trained
+    # 6 trajectories of 120 samples in windows of 40: 18 windows an epoch, a batch of a quarter of them
+    assert "plan: batch: 4 of 18 windows an epoch" in printed and ckpt["train_config"]["batch_size"] == 4
     history = ckpt["history"]
     assert ckpt["model_config"]["arch"] == "node" and ckpt["model_config"]["n_states"] == 3
     assert ckpt["best_epoch"] > 0 and history[ckpt["best_epoch"]]["valid_nrmse"] < history[0]["valid_nrmse"]
@@ -94,7 +100,7 @@ def test_the_cli_trains_it_by_the_free_run(trained):
 
 
 def test_the_fmu_validates_and_co_simulates_as_the_torch_free_run(trained, data):
-    _, path, fmu = trained
+    _, path, fmu, _ = trained
     assert validate_fmu(str(fmu)) == []
     ds = data[0]
     model = load_model(path).double()
@@ -163,6 +169,14 @@ def test_bad_options_are_one_line_status_2_and_no_file(bad, says, data, tmp_path
     assert not out.exists() and not list(tmp_path.iterdir())
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_search_tries_no_feedback_noise_on_it():
+    from nnfmu.study.time_space import axes
+    from nnfmu.training import TrainConfig
+
+    space = axes(NodeConfig(n_u=1, n_y=1), TrainConfig(), {"arch": "node"}, longest=400)
+    assert space["arch"] == ("node",) and space["feedback_noise"] == (0.0,)  # the node refuses feedback noise
 
 
 def test_its_options_are_listed_under_its_name(capsys):

@@ -9,7 +9,9 @@
 It is a :class:`~nnfmu.hybrid.HybridStepModel` whose physics (:func:`nnfmu.node.config.node_physics`) is a
 generated zero ODE, so the hybrid's derivative correction on every state *is* the whole model: training
 (the free run), checkpoints, scoring and export (an FMU with co-simulation, Model Exchange and directional
-derivatives) are the hybrid's. ``nnfmu train --arch node [--states N] [--time-scale SAMPLES]``.
+derivatives) are the hybrid's. Unlike the hybrid, and like the networks, ``nnfmu train`` plans its windows,
+batch and budget from the data (a black box has no physics to tell its time scales), without a linear path.
+``nnfmu train --arch node [--states N] [--time-scale SAMPLES]``.
 
 This module registers the record only (no torch, no CasADi); the code is imported on first use.
 """
@@ -54,7 +56,6 @@ register_architecture(Architecture(
                help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
                     "needed)"),
     ),
-    data_plan=False,
     linear_path=False,
     strategies=("parallel",),
     dtype="float64",

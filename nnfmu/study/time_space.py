@@ -44,10 +44,12 @@ def axes(model_config: ModelConfig, train_config: TrainConfig, given, longest: i
     windows = (truncate,)
     if truncate is not None and "truncate" not in given:
         windows = tuple(sorted({w for f in TRUNCATE_FACTORS if 2 <= (w := int(round(f * truncate))) <= longest}))
+    # a model that feeds back no output (a neural ODE's state is its own) refuses feedback noise: search none
+    noises = NOISES if architectures.model_class(arch).takes_feedback_noise else (0.0,)
     return {"arch": (arch,) if "arch" in given else (arch,) + tuple(a for a in arch_order() if a != arch),
             "hidden": (model_config.hidden,) if "hidden" in given else HIDDEN,
             "lr": (train_config.lr,) if "lr" in given else LRS,
-            "feedback_noise": (train_config.feedback_noise,) if "feedback_noise" in given else NOISES,
+            "feedback_noise": (train_config.feedback_noise,) if "feedback_noise" in given else noises,
             "truncate": windows}
 
 
