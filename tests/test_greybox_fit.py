@@ -18,7 +18,7 @@ import pytest
 from nnfmu.cli import main
 from nnfmu.cosim import FmuSimulator
 from nnfmu.data import from_arrays, save_dataset
-from nnfmu.greybox import FitConfig, fit_greybox, load_fit, standard_errors
+from nnfmu.greybox import FitConfig, fit_greybox, load_fit, save_fit, standard_errors
 from nnfmu.greybox.problem import build_problem, cut_windows
 from nnfmu.greybox.solvers import Tracker
 from nnfmu.physics import slider_system, system_from_document
@@ -82,23 +82,28 @@ def test_standard_errors_are_the_parameter_block_of_the_whole_gauss_newton_covar
                                rtol=1e-8)
 
 
-def test_the_fit_file_reloads_and_exports_to_an_fmu_that_simulates_as_the_fitted_model(data, fitted, tmp_path,
-                                                                                         capsys):
-    ds, folder = data
+def test_nnfmu_fit_prints_the_estimates_and_writes_a_file_that_reloads(data, fitted, tmp_path, capsys):
     out = tmp_path / "fit.json"
-    assert main(["fit", "slider", "--data", str(folder), "--free", "m,d", "--start", "m=1.6,d=1.3",
+    assert main(["fit", "slider", "--data", str(data[1]), "--free", "m,d", "--start", "m=1.6,d=1.3",
                  "--window", "100", "--quiet", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "std error" in printed and "test: NRMSE" in printed
     doc = json.loads(out.read_text())
     assert doc["format"] == "nnfmu-greybox-fit/1" and set(doc["fit"]["parameters"]) == {"m", "d"}
-    system, report = load_fit(out)
     again = system_from_document(doc["physics"])
     np.testing.assert_allclose(again.parameter_values(), fitted.system.parameter_values(), rtol=1e-6)
+    system, report = load_fit(out)
+    assert system.free_parameters == ("m", "d") and report["parameters"]["m"]["std_error"] > 0
+
+
+def test_the_fit_exports_to_an_fmu_that_simulates_as_the_fitted_model(data, fitted, tmp_path):
+    ds = data[0]
+    out = save_fit(tmp_path / "fit.json", fitted.system, fitted.report)
     fmu = tmp_path / "fit.fmu"
     assert main(["export", str(out), "-o", str(fmu)]) == 0
     assert fmpy.validation.validate_fmu(str(fmu)) == []
     assert fmpy.read_model_description(str(fmu)).modelExchange is not None
+    system = fitted.system
     u, y = ds.test.u[0], ds.test.y[0]
     with FmuSimulator(fmu, ["F"], ["pos"], system.Ts) as sim:
         y_fmu = sim.simulate(u, y[0])
