@@ -35,7 +35,7 @@ def default_states(n_y: int) -> int:
 
 
 def node_physics(n_x: int, n_u: int, n_y: int) -> PhysicsSystem:
-    """The zero ODE over ``n_x`` states with inputs ``u1..``, outputs ``y1..`` and parameters ``y<i>_mean``, ``y<i>_std``.
+    """The zero ODE over ``n_x`` states: inputs ``u1..``, outputs ``y1..``, parameters ``y<i>_mean``, ``y<i>_std``.
 
     Its time unit is one sample (``Ts = 1``): the model's RK4 runs at the data's sample time, and the
     correction's scale comes from :attr:`NodeConfig.time_scale`.
