@@ -104,7 +104,7 @@ def _table(printed: str) -> list[list[str]]:
 
 @pytest.mark.slow
 def test_a_search_in_a_local_loopback_ray_keeps_the_best_trial(tmp_path, capsys, monkeypatch):
-    """A real search of 1.5 minutes on a tiny linear system (Ray's start takes 10-30 s of it on 2 busy cores, and
+    """A real search of 2.5 minutes on a tiny linear system (Ray's start takes 10-30 s of it on 2 busy cores, and
     the suite's other worker keeps one of them busy)."""
     import psutil
     import ray
@@ -130,11 +130,11 @@ def test_a_search_in_a_local_loopback_ray_keeps_the_best_trial(tmp_path, capsys,
 
     monkeypatch.setattr(time_search, "ray_session", watched_session)
     monkeypatch.setattr(time_search, "search_for", recorded_search)
-    args = _args(max_minutes=1.5, started=time.monotonic())  # the budget counts from the command's start
+    args = _args(max_minutes=2.5, started=time.monotonic())  # the budget counts from the command's start
     ds = dataset(true_system(), noise=0.05)
     model = ModelConfig(arch="gru", n_u=ds.n_u, n_y=ds.n_y)
-    train = TrainConfig(max_minutes=1.5, epochs=UNBOUNDED_EPOCHS, patience=0)
-    given = {"max_minutes": 1.5}
+    train = TrainConfig(max_minutes=2.5, epochs=UNBOUNDED_EPOCHS, patience=0)
+    given = {"max_minutes": 2.5}
     ds, model, train, linear = prepare(args, ds, model, train, given)
     out = tmp_path / "kept.pt"
     assert run_search(args, ds, model, train, out, types.SimpleNamespace(type="cpu"), linear, given) == 0
