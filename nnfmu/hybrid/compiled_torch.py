@@ -142,9 +142,23 @@ def _source(fwd: ca.Function, rev: ca.Function) -> str:
     return "#define CASADI_SYMBOL_EXPORT\n" + code + _DRIVER + entries
 
 
+#: Characters of generated C above which it is compiled at -O1: GCC's -O2/-O3 time grows faster than linearly
+#: with the size of one straight-line function. A hybrid's fused step on a user's two-tank model (1.9 MB of C,
+#: hidden 32) took 153 CPU-s at -O3 and 18 s at -O1, and trained at the same speed (3.5 against 4.1 CPU-s for
+#: 3 epochs, AMD EPYC); the slider_viscous one (3.6 MB) had not compiled after 5 CPU-minutes at -O3.
+LARGE_SOURCE = 1_000_000
+
+
+def _flags(source: str) -> tuple[str, ...]:
+    """The build flags: :data:`nnfmu.cbuild.DEFAULT_FLAGS`, with -O1 for sources over :data:`LARGE_SOURCE`."""
+    if len(source) <= LARGE_SOURCE:
+        return tuple(cbuild.DEFAULT_FLAGS)
+    return tuple("-O1" if flag.startswith("-O") else flag for flag in cbuild.DEFAULT_FLAGS)
+
+
 def _library(source: str, name: str, compiler: str | None) -> ctypes.CDLL:
     """Compile ``source`` once (cached by its hash, :func:`nnfmu.cbuild.build_cached`) and load it."""
-    target = cbuild.build_cached(f"torch_{name}", source, flags=(*cbuild.DEFAULT_FLAGS, "-shared"), compiler=compiler,
+    target = cbuild.build_cached(f"torch_{name}", source, flags=(*_flags(source), "-shared"), compiler=compiler,
                                  what=f"compiling {name!r} for torch (physics backend 'compiled'; "
                                       "use 'sx' where no C compiler is available)")
     lib = cbuild.load(target)
