@@ -30,6 +30,7 @@ LAYERS = (
     ("training", {"training"}),
     ("export", {"export"}),
     ("hybrid", {"hybrid"}),
+    ("node", {"node"}),
     ("study", {"study"}),
     ("cli", {"cli"}),
 )

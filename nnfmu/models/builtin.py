@@ -32,4 +32,3 @@ for _record in (
 ):
     register_architecture(_record)
 
-import nnfmu.node  # noqa: E402,F401  (the neural ODE, a hybrid with no physics, registers itself)
