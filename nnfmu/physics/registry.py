@@ -34,7 +34,8 @@ class PhysicsEntry:
     corrected_states : tuple of str, optional
         States whose derivative a hybrid corrects by default (None: every state).
     correction_time : float, optional
-        Seconds; a hybrid's default scale of its derivative correction (None: the sample time).
+        Seconds; a hybrid's default scale of its derivative correction (None: ten sample times,
+        :data:`nnfmu.hybrid.config.DEFAULT_CORRECTION_SAMPLES`).
     """
 
     name: str
