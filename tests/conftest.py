@@ -21,7 +21,7 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(config, items):
     """``--dist loadgroup``: each module runs whole on one worker (its module fixtures are built once), and
-    the modules that start Ray share one group, so that two Ray instances never compete for the two cores."""
+    the modules that start Ray share one group, so that no two of them run side by side on the two cores."""
     for item in items:
         name = item.path.name
         item.add_marker(pytest.mark.xdist_group("ray" if name in RAY_MODULES else name))
