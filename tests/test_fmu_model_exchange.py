@@ -190,6 +190,28 @@ class MeInstance:
         refs = [self.vr[k] for k in unknowns]
         return np.column_stack([self.fmu.getDirectionalDerivative(refs, [self.vr[k]], [1.0]) for k in knowns])
 
+    def finite_differences(self, unknowns, inputs: dict, floor: float) -> np.ndarray:
+        """Central differences of ``unknowns`` over the states, then ``inputs`` (name -> value), at the current
+        states and those inputs: the columns of :meth:`jacobian` with knowns ``[*states, *inputs]``. The step of
+        an entry z is ``1e-6 max(|z|, floor)``; the states and inputs are left at the point."""
+        point = np.concatenate([self.states_now(), list(inputs.values())])
+        n_x = point.size - len(inputs)
+
+        def unknowns_at(z):
+            self.set_states(z[:n_x])
+            self.set(dict(zip(inputs, z[n_x:])))
+            return self.get(unknowns)
+
+        fd = np.zeros((len(unknowns), point.size))
+        for j in range(point.size):
+            h = 1e-6 * max(abs(point[j]), floor)
+            plus, minus = point.copy(), point.copy()
+            plus[j] += h
+            minus[j] -= h
+            fd[:, j] = (unknowns_at(plus) - unknowns_at(minus)) / (2 * h)
+        unknowns_at(point)
+        return fd
+
 
 @pytest.mark.parametrize("which", ["valve", "hybrid"])
 def test_directional_derivatives_equal_finite_differences(valve_fmu, hybrid_fmu, which):
@@ -201,20 +223,7 @@ def test_directional_derivatives_equal_finite_differences(valve_fmu, hybrid_fmu,
     unknowns = [f"der({s})" for s in me.states] + ["s", "p"]
     knowns = [*me.states, "u1", "u2"]
     jacobian = me.jacobian(unknowns, knowns)
-    point = np.concatenate([x, [120.0, 80.0]])
-
-    def unknowns_at(z):
-        me.set_states(z[:7])
-        me.set({"u1": z[7], "u2": z[8]})
-        return me.get(unknowns)
-
-    fd = np.zeros_like(jacobian)
-    for j in range(point.size):
-        h = 1e-6 * max(abs(point[j]), 1e-5)
-        plus, minus = point.copy(), point.copy()
-        plus[j] += h
-        minus[j] -= h
-        fd[:, j] = (unknowns_at(plus) - unknowns_at(minus)) / (2 * h)
+    fd = me.finite_differences(unknowns, {"u1": 120.0, "u2": 80.0}, floor=1e-5)
     scale = np.abs(jacobian).max(axis=1, keepdims=True)  # per unknown: relative to its largest sensitivity
     np.testing.assert_array_less(np.abs(jacobian - fd) / scale, 1e-6)
     declared = {(u.variable.name, d.name) for u in [*me.md.derivatives, *me.md.outputs] for d in u.dependencies}
