@@ -188,7 +188,7 @@ def test_defaults_come_from_the_registry_or_cover_every_state(model_file):
     assert (slider.corrected_states, slider.correction_time, slider.train_physics) == (("v",), 0.1, ())
     assert "physics_document" not in slider.to_dict()  # a registered model's checkpoint stays as it was
     user = HybridConfig(n_u=1, n_y=1, physics=f"{model_file}:viscous_slider")
-    assert (user.corrected_states, user.correction_time, user.train_physics) == (("pos", "v"), 0.1, ("m", "d"))
+    assert (user.corrected_states, user.correction_time, user.train_physics) == (("v",), 0.1, ("m", "d"))  # pos: kinematic
     assert HybridConfig.from_dict(json.loads(json.dumps(user.to_dict()))) == user
     assert len(repr(user)) < 1000  # error messages quote configs: not the serialized model
     assert user.replace(physics="slider", corrected_states=None).system() is physics_system("slider")  # not the file's

@@ -31,8 +31,8 @@ from typing import Mapping
 
 from nnfmu.errors import ConfigError, ShapeError, UnknownOptionError
 from nnfmu.hybrid.compiled_torch import BACKENDS
-from nnfmu.hybrid.parameters import (document_system, document_text, normalise_physics_params, physics_system,
-                                     registered_defaults)
+from nnfmu.hybrid.parameters import (document_system, document_text, kinematic_states, normalise_physics_params,
+                                     physics_system, registered_defaults)
 from nnfmu.hybrid.parameters import load_physics_params  # noqa: F401  (nnfmu.hybrid exports it from here)
 from nnfmu.models.config import ACTIVATIONS, ModelConfig
 from nnfmu.physics import PhysicsSystem
@@ -86,7 +86,9 @@ class HybridConfig(ModelConfig):
         ``'step'``: ``x+ = RK4_physics(x, u, p) + Ts * delta(x, u)``, one network call per sample.
     corrected_states : tuple of str or None
         States whose derivative ``delta`` corrects (None: the registered model's default, see
-        :class:`nnfmu.physics.PhysicsEntry`; every state for a model the registry does not know).
+        :class:`nnfmu.physics.PhysicsEntry`; for a model the registry does not know, every state except the
+        kinematic identities, those whose derivative is exactly another state such as ``dpos/dt = v``
+        (:func:`nnfmu.hybrid.parameters.kinematic_states`), or every state if that leaves none).
     correction_time : float or None
         Seconds; ``delta_i = state_scale_i / correction_time * N_i`` (None: the registered model's
         default; :data:`DEFAULT_CORRECTION_SAMPLES` sample times of the physics for a model the registry
@@ -132,7 +134,9 @@ class HybridConfig(ModelConfig):
         entry = registered_defaults(system, None if self.physics_document else self.physics)
         if self.corrected_states is None:
             default = entry.corrected_states if entry is not None else None
-            object.__setattr__(self, "corrected_states", default or tuple(v.name for v in system.states))
+            kinematic = kinematic_states(system)
+            dynamic = tuple(v.name for v in system.states if v.name not in kinematic)
+            object.__setattr__(self, "corrected_states", default or dynamic or tuple(v.name for v in system.states))
         self._check_names("corrected_states", [v.name for v in system.states], "state")
         if not self.corrected_states:
             raise ConfigError("corrected_states is empty: the network would correct nothing; name at least one state")
