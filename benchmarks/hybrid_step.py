@@ -31,10 +31,10 @@ from nnfmu.training.compiled_rollout import ENV_SWITCH
 ARM_Y0 = np.array([10.0, -30.0, 40.0, 5.0, -20.0, 15.0])
 
 
-def model_and_batch(physics: str, batch: int, steps: int, hidden: int):
+def model_and_batch(physics: str, batch: int, steps: int, hidden: int, backend: str = "compiled"):
     """A float64 hybrid with a nonzero correction; normalised inputs and initial outputs near its operating point."""
     n = {"valve": 2, "arm": 6}[physics]
-    config = HybridConfig(n_u=n, n_y=n, physics=physics, hidden=hidden)
+    config = HybridConfig(n_u=n, n_y=n, physics=physics, hidden=hidden, physics_backend=backend)
     model = build_model(config).double().train()
     g = torch.Generator().manual_seed(0)
     with torch.no_grad():

@@ -100,6 +100,7 @@ register_architecture(Architecture(
     model_class="nnfmu.hybrid.model:HybridStepModel",
     summary="a physics model plus a neural correction; see --physics",
     to_casadi="nnfmu.hybrid.export:hybrid_to_casadi",
+    training_rollout="nnfmu.hybrid.graphed:graphed_rollout",
     casadi_model="nnfmu.hybrid.export:hybrid_casadi_model",
     options=(
         Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",

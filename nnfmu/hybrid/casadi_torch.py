@@ -22,9 +22,18 @@ Gradients (``gradients=``):
   ``reverse(1)`` of the reverse Function, and so on.
 - ``"autograd"``: plain torch autograd through the translated operations.
   Needed for ``torch.func`` transforms; records every intermediate.
+
+On a CUDA device (``"casadi"`` mode) the translated code runs through :func:`torch.compile`, which
+fuses its hundreds of element-wise operations into a few kernels: one launch instead of one per
+instruction, compiled once per function, dtype and batch shape. Where compiling fails (no Triton,
+an old GPU) it warns once and runs the operations one by one (same numbers, slower).
+``NNFMU_COMPILED_ROLLOUT=0`` turns it off.
 """
 
 from __future__ import annotations
+
+import os
+import warnings
 
 import casadi as ca
 import numpy as np
@@ -32,8 +41,10 @@ import torch
 
 from nnfmu.errors import ConfigError, ExportError, ShapeError
 from nnfmu.hybrid._sx_source import GeneratedSource, generate_source
+from nnfmu.training.compiled_rollout import ENV_SWITCH
 
 GRADIENT_MODES = ("casadi", "autograd")
+FUSED_DEVICES = ("cuda",)  #: device types whose translated code runs through torch.compile (module docstring)
 
 
 def sx_to_torch(fn: ca.Function, *, gradients: str = "casadi") -> "TorchFunction":
@@ -132,11 +143,13 @@ class TorchFunction(torch.nn.Module):
         self._compiled = _compile(self._generated, fn.name())
         self._constants: dict[tuple[torch.dtype, torch.device], tuple[torch.Tensor, ...]] = {}
         self._reverse: dict[tuple[bool, ...], TorchFunction] = {}
+        self._fused = None  # torch.compile of _compiled, made at the first call on a CUDA device
+        self._fusing_failed = False
 
     def __getstate__(self) -> dict:
         # The compiled code and the caches are rebuilt on unpickling; the CasADi Function pickles itself.
         state = self.__dict__.copy()
-        state.update(_compiled=None, _constants={}, _reverse={})
+        state.update(_compiled=None, _constants={}, _reverse={}, _fused=None, _fusing_failed=False)
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -168,7 +181,24 @@ class TorchFunction(torch.nn.Module):
             values = torch.tensor(self._generated.constants, dtype=torch.float64)
             self._constants[key] = tuple(values.to(dtype=key[0], device=key[1]).unbind())
         batch = first.shape[:-1] if inputs else torch.Size()
+        if self._fuses(key[1]):
+            try:
+                return self._fused(self._constants[key], key[0], key[1], batch, *inputs)
+            except Exception as exc:  # noqa: BLE001 (torch.compile's failures have no common type)
+                self._fusing_failed = True
+                warnings.warn(f"{self.name}: torch.compile cannot fuse the translated operations on {key[1]} "
+                              f"({type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}); "
+                              "they run one by one (same numbers, slower)", RuntimeWarning, stacklevel=2)
         return self._compiled(self._constants[key], key[0], key[1], batch, *inputs)
+
+    def _fuses(self, device: torch.device) -> bool:
+        """Whether to run the code through torch.compile: "casadi" gradients on a CUDA device (module docstring)."""
+        if (device.type not in FUSED_DEVICES or self.gradients != "casadi" or self._fusing_failed
+                or os.environ.get(ENV_SWITCH, "1") == "0"):
+            return False
+        if self._fused is None:
+            self._fused = torch.compile(self._compiled, fullgraph=True)
+        return True
 
     def reverse(self, needed: tuple[bool, ...]) -> "TorchFunction":
         """The translated ``reverse(1)`` Function, keeping only the adjoints of inputs marked in ``needed``.

@@ -249,16 +249,24 @@ class HybridStepModel(StepModel):
 
     def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
         """Free run: the same operations as :meth:`_step_norm`, with ``p`` and ``u`` computed once."""
+        out = self._free_run_eager(un, yn0)
+        self._check_finite(out)
+        return out
+
+    def _free_run_eager(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        """:meth:`_free_run_norm` without the check (what :mod:`nnfmu.hybrid.graphed` records on a GPU)."""
         p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused=True)
         x = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0].to(yn0.dtype)
         ys = [yn0]
         for k in range(un.shape[1] - 1):
             x, y = self._advance(x, u[:, k], un[:, k], p, plan)
             ys.append(self.normalise_y(y))
-        out = torch.stack(ys, dim=1)
+        return torch.stack(ys, dim=1)
+
+    def _check_finite(self, out: torch.Tensor) -> None:
+        """In training, warn that the simulation blew up if ``out`` is not finite (the trainer then stops)."""
         if self.training and not bool(torch.isfinite(out).all()):
             _warn_blow_up(self)
-        return out
 
     def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
@@ -272,7 +280,7 @@ def _warn_blow_up(model: "HybridStepModel") -> None:
     values = ", ".join(f"{k} = {v:.4g}" for k, v in model.physics_parameter_values().items())
     warnings.warn(f"the {model.physics.name} hybrid's simulation became non-finite in training: its ODE blew up "
                   f"(physical parameters {values}); check the model and its parameters, or lower the learning rate",
-                  RuntimeWarning, stacklevel=3)
+                  RuntimeWarning, stacklevel=4)
 
 
 def _trained_bounds(system: PhysicsSystem, trained) -> tuple[torch.Tensor | None, torch.Tensor | None]:

@@ -121,6 +121,10 @@ class Architecture:
     rollout_cell : {'rnn', 'lstm', 'gru'}, optional
         The cell of the compiled free run (:mod:`nnfmu.training.compiled_rollout`) that computes this
         architecture's step, for a model of exactly ``model_class``; None: torch runs the free run.
+    training_rollout : ``model -> free_run or None``, optional
+        A faster free run of one training batch, ``free_run(un, yn, past=None) -> (B, T, n_y)`` from ``yn[:, 0]``,
+        or None where it does not apply; the trainer calls it once per batch and back-propagates before the next
+        call (e.g. the hybrid's CUDA graphs, :mod:`nnfmu.hybrid.graphed`).
     options : tuple of Option
         Options of ``nnfmu train`` that only this architecture takes (its own config fields).
     grid : mapping field -> values
@@ -152,6 +156,7 @@ class Architecture:
     to_casadi: Ref | None = None
     casadi_model: Ref | None = None
     rollout_cell: str | None = None
+    training_rollout: Ref | None = None
     options: tuple[Option, ...] = ()
     grid: Mapping[str, tuple] = field(default_factory=dict)
     preset: Mapping[str, Any] = field(default_factory=dict)

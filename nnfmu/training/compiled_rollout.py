@@ -69,9 +69,13 @@ def training_rollout(model: StepModel):
     """``free_run(un, yn, past=None) -> predictions (B, T, n_y)``: a parallel training batch's free run from ``yn[:, 0]``.
 
     The compiled free run where it applies (:func:`compiled_rollout`; never with an init window
-    ``past``), else ``model.rollout_normalised(un, yn[:, 0], None, past)``. Call it after
+    ``past``), or the architecture's own (``Architecture.training_rollout``, e.g. the hybrid's CUDA graphs)
+    where it gives one, else ``model.rollout_normalised(un, yn[:, 0], None, past)``. Call it after
     ``model.train()`` and after setting ``model.feedback_noise``: both decide the path.
     """
+    own = architectures.architecture(model.config.arch).get("training_rollout")
+    if own is not None and (free_run := own(model)) is not None:
+        return free_run
     fast = compiled_rollout(model)
     if fast is None:
         return lambda un, yn, past=None: model.rollout_normalised(un, yn[:, 0], None, past)
