@@ -81,8 +81,12 @@ class RecordedFreeRuns:
     def _record(self, model: nn.Module, un: torch.Tensor, yn0: torch.Tensor) -> nn.Module | None:
         module = _FreeRun(model).train(model.training)
         try:
-            return torch.cuda.make_graphed_callables(module, (un.detach().clone(), yn0.detach().clone()),
-                                                     num_warmup_iters=WARMUP, allow_unused_input=True)
+            with warnings.catch_warnings():
+                # The warm-up runs on a side stream while the last batch's autograd graph may still be alive:
+                # torch warns of a stream mismatch that costs one synchronisation here, none in the replays.
+                warnings.filterwarnings("ignore", message="The AccumulateGrad node's stream does not match")
+                return torch.cuda.make_graphed_callables(module, (un.detach().clone(), yn0.detach().clone()),
+                                                         num_warmup_iters=WARMUP, allow_unused_input=True)
         except (RuntimeError, AssertionError, TypeError) as exc:
             self.failed = True
             warnings.warn(f"the hybrid's free run cannot be recorded as a CUDA graph ({str(exc).splitlines()[0]}); "
