@@ -71,13 +71,16 @@ def test_fmu_ships_sources_headers_and_platform_binary(version, platform_dir):
     fmu = built_fmu("nonlinear", version)
     names = set(zipfile.ZipFile(fmu).namelist())
     assert f"{platform_dir}tinynet.so" in names
-    core = ["nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c", "nnfmu_state.c", "nnfmu_libm.c"]
-    sources = {"model_casadi.c", *core, f"nnfmu_fmi{version}.c", f"fmi{version}Functions.h", "nnfmu_model.h",
-               "nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h"}
+    core = ["nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_core.c", "nnfmu_variables.c", "nnfmu_step.c",
+            "nnfmu_state.c", "nnfmu_me.c", "nnfmu_libm.c"]
+    sources = {"model_casadi.c", "model_me_casadi.c", *core, f"nnfmu_fmi{version}.c", f"fmi{version}Functions.h",
+               "nnfmu_model.h", "nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h"}
     assert {f"sources/{s}" for s in sources} <= names
     md = fmpy.read_model_description(str(fmu))
     listed = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
-    wrapper = ["nnfmu_fmi2.c"] if version == 2 else ["nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c"]
+    # one wrapper per FMI version holds every entry point, Model Exchange ones included, in every FMU
+    wrapper = ["nnfmu_fmi2.c", "nnfmu_fmi2_me.c"] if version == 2 else \
+        ["nnfmu_fmi3.c", "nnfmu_fmi3_me.c", "nnfmu_fmi3_unsupported.c"]
     assert sorted(listed) == sorted([*core, *wrapper])  # model_casadi.c is compiled through nnfmu_model.c
     if version == 3:
         assert "sources/buildDescription.xml" in names

@@ -7,8 +7,8 @@
 - fmi2/fmi3GetDirectionalDerivative equals central finite differences of the FMU's own derivatives
   and outputs to 1e-6 relative;
 - the Model Exchange state machine refuses what FMI forbids, and discrete-time models stay co-simulation;
-- the shipped sources (every template is in these two FMUs) compile as strict C99 for Windows, as MSVC
-  needs, and fmpy's CMake route rebuilds a binary that computes the same derivatives.
+- the shipped sources (the same templates in every FMU) compile as strict C99 for Windows, as MSVC
+  needs, with and without an ODE, and fmpy's CMake route rebuilds a binary that computes the same derivatives.
 """
 
 from __future__ import annotations
@@ -275,9 +275,9 @@ def test_discrete_time_models_stay_co_simulation(name):
     assert md.modelExchange is None and md.coSimulation is not None and not md.derivatives
 
 
-@pytest.mark.parametrize("which", ["valve", "hybrid"])
+@pytest.mark.parametrize("which", ["valve", "hybrid", "linear"])
 def test_sources_are_strict_c99_for_windows(valve_fmu, hybrid_fmu, which, tmp_path):
-    fmu = valve_fmu if which == "valve" else hybrid_fmu[1]
+    fmu = {"valve": valve_fmu, "hybrid": hybrid_fmu[1]}.get(which) or built_fmu("linear", 2)  # linear: no ODE
     md = fmpy.read_model_description(str(unzipped(fmu)))
     files = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
     assert {"nnfmu_me.c", "nnfmu_me_model.c", f"nnfmu_fmi{md.fmiVersion[0]}_me.c"} <= set(files)

@@ -2,14 +2,16 @@
 
 Sizes, the value-reference layout, start values, the inputs' valid ranges and
 every variable's name, for the hand-written core in ``templates/`` (which
-never hard-codes any of them), plus the prefixed CasADi entry points.
+never hard-codes any of them), plus the prefixed CasADi entry points of init
+and step. Every FMU's header has the same constants: one without an ODE says
+``NNFMU_HAS_ODE 0`` and has no continuous states (the core then refuses Model
+Exchange); the ODE's own entry points come through the table in
+``model_me_casadi.c`` (:mod:`nnfmu.export.model_exchange`).
 """
 
 from __future__ import annotations
 
 import sys
-from typing import Sequence
-
 from nnfmu.export.model_description import MAX_SAMPLES_PER_STEP, FmuDescription, num
 from nnfmu.window_names import past_name
 
@@ -32,9 +34,22 @@ def _bound(value: float | None, unbounded: float) -> str:
     return num(unbounded if value is None else value)
 
 
-def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str],
-                    extra_lines: Sequence[str] = ()) -> str:
-    """``nnfmu_model.h`` for the FMU described by ``desc`` with state size ``n_x``; ``extra_lines`` at its end."""
+def _ode_lines(desc: FmuDescription) -> list[str]:
+    """The continuous states of Model Exchange: value references, nominals and names (none without an ODE)."""
+    states, derivatives = desc.by_role("state"), desc.by_role("derivative")
+    after = len(desc.variables)  # no states: empty groups after the last value reference
+    return [
+        "/* Model Exchange: the ODE's continuous states x and their derivatives (value references from these on) */",
+        f"#define NNFMU_HAS_ODE {int(bool(states))}",
+        f"#define NNFMU_VR_X {states[0].value_reference if states else after}",
+        f"#define NNFMU_VR_DX {derivatives[0].value_reference if states else after}",
+        _c_array("double", "nnfmu_x_nominal", [num(v.nominal) for v in states]),
+        _c_array("char* const", "nnfmu_x_names", [_c_string(v.name) for v in states]),
+    ]
+
+
+def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str]) -> str:
+    """``nnfmu_model.h`` for the FMU described by ``desc`` with state size ``n_x``."""
     spec = desc.spec
     vr = {v.role: v.value_reference for v in reversed(desc.variables)}  # the first of each role
     first = {role: vr.get(role, len(desc.variables))
@@ -76,5 +91,5 @@ def render_c_header(desc: FmuDescription, n_x: int, entry_points: dict[str, str]
     lines.append("/* the inputs' valid ranges (modelDescription min/max; unbounded: +-DBL_MAX) */")
     lines.append(_c_array("double", "nnfmu_u_min", [_bound(v.min, -sys.float_info.max) for v in spec.inputs]))
     lines.append(_c_array("double", "nnfmu_u_max", [_bound(v.max, sys.float_info.max) for v in spec.inputs]))
-    lines += [*extra_lines, "", "#endif /* NNFMU_MODEL_H */", ""]
+    lines += [*_ode_lines(desc), "", "#endif /* NNFMU_MODEL_H */", ""]
     return "\n".join(lines)

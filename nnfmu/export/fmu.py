@@ -6,8 +6,10 @@ and FMI 3.0 entry points), its sources (so that any importer can rebuild it,
 e.g. ``fmpy.build.build_platform_binary``) and a binary for this platform,
 compiled with the system C compiler, or for several (``platforms``: the others
 cross-compiled with Zig, :mod:`nnfmu.export.platforms`). A continuous-time model
-also gets Model Exchange (:mod:`nnfmu.export.model_exchange`). No Python, no
-libtorch inside.
+also gets Model Exchange (:mod:`nnfmu.export.model_exchange`). Every FMU of an FMI
+version gets the same template files: one core for both interfaces, as in the FMI
+Reference FMUs; only the generated code (``model_casadi.c``, ``model_me_casadi.c``,
+``nnfmu_model.h``) differs. No Python, no libtorch inside.
 
 Behaviour of the FMU (the reference is docs/fmu.md; the C side is ``templates/nnfmu_core.h``):
 
@@ -51,13 +53,17 @@ from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.system import CasadiModel
 from nnfmu.tempdirs import private_temp_dir
 
-TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", "nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c",
-             "nnfmu_state.c", "nnfmu_libm.c")
-#: Compiled, in this order; model_casadi.c is not listed: nnfmu_model.c includes it (see nnfmu_libm.h).
-CORE_SOURCES = ("nnfmu_model.c", "nnfmu_core.c", "nnfmu_step.c", "nnfmu_state.c", "nnfmu_libm.c")
+#: Compiled, in this order; model_casadi.c and model_me_casadi.c are not listed: nnfmu_model.c and
+#: nnfmu_me_model.c include them (see nnfmu_libm.h).
+CORE_SOURCES = ("nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_core.c", "nnfmu_variables.c", "nnfmu_step.c",
+                "nnfmu_state.c", "nnfmu_me.c", "nnfmu_libm.c")
+#: The core: every FMU gets these files.
+TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", *CORE_SOURCES)
 #: nnfmu's own build links libm, so the model code calls it directly.
 OWN_BUILD_DEFINES = ("-DNNFMU_LINKS_LIBM",)
-WRAPPER = {2: ("nnfmu_fmi2.h", "nnfmu_fmi2.c"), 3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_unsupported.c")}
+#: Each FMI version's entry points, co-simulation and Model Exchange alike.
+WRAPPER = {2: ("nnfmu_fmi2.h", "nnfmu_fmi2.c", "nnfmu_fmi2_me.c"),
+           3: ("nnfmu_fmi3.h", "nnfmu_fmi3.c", "nnfmu_fmi3_me.c", "nnfmu_fmi3_unsupported.c")}
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 
@@ -123,33 +129,30 @@ def fmi_header_dir() -> Path:
 def _write_sources(model: CasadiModel, fmi_version: int, sources: Path, options: BuildOptions, with_me: bool):
     """Generate and copy every C file into ``sources``; return the description and the C files to compile.
 
-    ``with_me``: add the Model Exchange interface of ``model.continuous`` (:mod:`nnfmu.export.model_exchange`).
+    ``with_me``: add the Model Exchange interface of ``model.continuous`` (:mod:`nnfmu.export.model_exchange`);
+    without it the same templates make a co-simulation-only FMU.
     """
     sources.mkdir(parents=True)
     prefix = codegen.symbol_prefix(model)
     code = codegen.generate_c(model, sources, prefix, speed_patch=options.speed_patch, profile=options.profile,
                               precision=options.precision)
-    entry_points, structure, me_files = dict(code.entry_points), None, ()
+    structure = None
     if with_me:
-        entry_points.update(_model_exchange.generate_c(model, sources, prefix, speed_patch=options.speed_patch,
-                                                       profile=options.profile))
+        _model_exchange.generate_c(model, sources, prefix, speed_patch=options.speed_patch, profile=options.profile)
         structure = _model_exchange.continuous_structure(model)
-        me_files = (*_model_exchange.ME_TEMPLATES, *_model_exchange.ME_WRAPPER[fmi_version])
+    else:
+        _model_exchange.generate_no_ode(sources)
     templates = resources.files("nnfmu.export") / "templates"
-    for name in (*TEMPLATES, *WRAPPER[fmi_version], *me_files):
+    for name in (*TEMPLATES, *WRAPPER[fmi_version]):
         (sources / name).write_text((templates / name).read_text(encoding="utf-8"), encoding="utf-8")
     for name in FMI_HEADERS[fmi_version]:
         shutil.copyfile(fmi_header_dir() / name, sources / name)
     token = "{" + str(uuid.UUID(hashlib.sha256((prefix + str(fmi_version)).encode()).hexdigest()[:32])) + "}"
     stamp = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
     desc = model_description.describe(model.spec, token, stamp, fmi_version, structure=structure)
-    header = c_header.render_c_header(desc, code.n_x, entry_points,
-                                      extra_lines=_model_exchange.c_header_lines(desc) if with_me else ())
-    (sources / "nnfmu_model.h").write_text(header, encoding="utf-8")
-    me_sources = _model_exchange.ME_SOURCES if with_me else ()
-    c_files = [*CORE_SOURCES, *me_sources, *(f for f in (*WRAPPER[fmi_version], *me_files)
-                                            if f.endswith(".c") and f not in me_sources)]
-    return desc, c_files
+    (sources / "nnfmu_model.h").write_text(c_header.render_c_header(desc, code.n_x, dict(code.entry_points)),
+                                           encoding="utf-8")
+    return desc, [*CORE_SOURCES, *(f for f in WRAPPER[fmi_version] if f.endswith(".c"))]
 
 
 def _write_fmu_tree(model: CasadiModel, fmi_version: int, root: Path, options: BuildOptions, with_me: bool,

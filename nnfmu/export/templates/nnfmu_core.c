@@ -1,5 +1,6 @@
-/* nnfmu FMU core: logging, the instance's lifecycle and state machine, and its variables.
- * See nnfmu_core.h for the behaviour; stepping is in nnfmu_step.c, FMU states in nnfmu_state.c. */
+/* nnfmu FMU core: logging, the instance's lifecycle and the state machine of both interfaces.
+ * See nnfmu_core.h for the behaviour; the variables are in nnfmu_variables.c, stepping in nnfmu_step.c,
+ * FMU states in nnfmu_state.c, Model Exchange in nnfmu_me.c. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -8,9 +9,6 @@
 
 #include "nnfmu_instance.h"
 #include "nnfmu_libm.h" /* math.h: NAN */
-#ifdef NNFMU_MODEL_EXCHANGE
-#include "nnfmu_me.h"
-#endif
 
 /* ---- logging ------------------------------------------------------------------------------- */
 
@@ -101,37 +99,38 @@ nnfmu_status nnfmu_require(nnfmu_instance *inst, const char *caller, int modes) 
 
 /* ---- lifecycle ----------------------------------------------------------------------------- */
 
+/* The larger of the work sizes so far and those of a CasADi function (`work` may be NULL: no function). */
+static void widen(casadi_int size[4], nnfmu_casadi_work work) {
+  casadi_int n[4] = {0, 0, 0, 0};
+  int k;
+  if (work) work(&n[0], &n[1], &n[2], &n[3]);
+  for (k = 0; k < 4; ++k) if (n[k] > size[k]) size[k] = n[k];
+}
+
+/* One set of CasADi work arrays for init, step and the ODE (the latter absent without an ODE). */
 static int allocate_work(nnfmu_instance *inst) {
-  casadi_int n_arg, n_res, n_iw, n_w, a, r, i, w;
-  NNFMU_INIT_WORK(&a, &r, &i, &w);
-  n_arg = a; n_res = r; n_iw = i; n_w = w;
-  NNFMU_STEP_WORK(&a, &r, &i, &w);
-  if (a > n_arg) n_arg = a;
-  if (r > n_res) n_res = r;
-  if (i > n_iw) n_iw = i;
-  if (w > n_w) n_w = w;
-  inst->arg = (const casadi_real **)calloc((size_t)NNFMU_ALLOC(n_arg), sizeof *inst->arg);
-  inst->res = (casadi_real **)calloc((size_t)NNFMU_ALLOC(n_res), sizeof *inst->res);
-  inst->iw = (casadi_int *)calloc((size_t)NNFMU_ALLOC(n_iw), sizeof *inst->iw);
-  inst->w = (casadi_real *)calloc((size_t)NNFMU_ALLOC(n_w), sizeof *inst->w);
+  casadi_int size[4] = {0, 0, 0, 0}; /* arg, res, iw, w */
+  widen(size, NNFMU_INIT_WORK);
+  widen(size, NNFMU_STEP_WORK);
+  widen(size, nnfmu_model_ode.rhs_work);
+  widen(size, nnfmu_model_ode.jvp_work);
+  inst->arg = (const casadi_real **)calloc((size_t)NNFMU_ALLOC(size[0]), sizeof *inst->arg);
+  inst->res = (casadi_real **)calloc((size_t)NNFMU_ALLOC(size[1]), sizeof *inst->res);
+  inst->iw = (casadi_int *)calloc((size_t)NNFMU_ALLOC(size[2]), sizeof *inst->iw);
+  inst->w = (casadi_real *)calloc((size_t)NNFMU_ALLOC(size[3]), sizeof *inst->w);
   return inst->arg && inst->res && inst->iw && inst->w;
 }
 
-/* FMUs of continuous-time models: every instance, of either interface, gets the ODE's workspace. */
-static int allocate_model_exchange(nnfmu_instance *inst) {
-#ifdef NNFMU_MODEL_EXCHANGE
-  return nnfmu_me_enable(inst);
-#else
-  (void)inst;
-  return 1;
-#endif
-}
-
-nnfmu_instance *nnfmu_instantiate(const char *instance_name, const char *token, nnfmu_log_sink sink,
-                                  void *env, int logging_on) {
+nnfmu_instance *nnfmu_instantiate(const char *caller, nnfmu_interface interface_type, const char *instance_name,
+                                  const char *token, nnfmu_log_sink sink, void *env, int logging_on) {
   nnfmu_instance *inst;
   const char *name = instance_name ? instance_name : NNFMU_MODEL_IDENTIFIER;
   const char *missing_math = nnfmu_libm_missing();
+  if (interface_type == NNFMU_INTERFACE_ME && !NNFMU_HAS_ODE) {
+    nnfmu_log_early(sink, env, name, "%s: this FMU is for co-simulation only: its model has no ODE for Model "
+                    "Exchange", caller);
+    return NULL;
+  }
   if (!token || strcmp(token, NNFMU_TOKEN) != 0) {
     nnfmu_log_early(sink, env, name, "instantiate: the instantiation token (GUID) must be %s but was %s; "
                     "the model description and the binary come from different builds", NNFMU_TOKEN,
@@ -144,12 +143,13 @@ nnfmu_instance *nnfmu_instantiate(const char *instance_name, const char *token, 
   }
   inst = (nnfmu_instance *)calloc(1, sizeof *inst);
   if (inst) inst->name = (char *)malloc(strlen(name) + 1);
-  if (!inst || !inst->name || !allocate_work(inst) || !allocate_model_exchange(inst)) {
+  if (!inst || !inst->name || !allocate_work(inst)) {
     nnfmu_log_early(sink, env, name, "instantiate: out of memory");
     nnfmu_free(inst);
     return NULL;
   }
   strcpy(inst->name, name);
+  inst->interface_type = interface_type;
   inst->sink = sink;
   inst->env = env;
   inst->logging_on = logging_on;
@@ -164,7 +164,6 @@ void nnfmu_free(nnfmu_instance *inst) {
   free(inst->res);
   free(inst->iw);
   free(inst->w);
-  free(inst->me);
   free(inst);
 }
 
@@ -208,148 +207,13 @@ nnfmu_status nnfmu_exit_initialization(nnfmu_instance *inst, const char *caller)
     if (!(inst->v.y_start[i] - inst->v.y_start[i] == 0.0))
       return nnfmu_error(inst, "%s: %s (the initial output) must be finite but was %g", caller,
                          nnfmu_y_start_names[i], inst->v.y_start[i]);
-#ifdef NNFMU_MODEL_EXCHANGE
-  if (nnfmu_me_interface(inst)) return nnfmu_me_exit_initialization(inst);
-#endif
-  inst->v.mode = MODE_STEP;
+  if (inst->interface_type == NNFMU_INTERFACE_ME) nnfmu_me_start(inst);
+  else inst->v.mode = MODE_STEP;
   return NNFMU_OK;
 }
 
 nnfmu_status nnfmu_terminate(nnfmu_instance *inst, const char *caller) {
   if (nnfmu_require(inst, caller, MODE_STEP | MODE_EVENT | MODE_CONTINUOUS) != NNFMU_OK) return NNFMU_ERROR;
   inst->v.mode = MODE_TERMINATED;
-  return NNFMU_OK;
-}
-
-/* ---- variables ----------------------------------------------------------------------------- */
-
-typedef enum { KIND_INPUT, KIND_OUTPUT, KIND_FIXED, KIND_TUNABLE } var_kind;
-
-/* One group of Real variables with consecutive value references: adding an input of init or step
- * (e.g. a window of past samples) is one more row here and one more array in nnfmu_values. */
-typedef struct {
-  unsigned long first;
-  int count;
-  var_kind kind;
-  size_t offset; /* of the group's array in nnfmu_values */
-  const char *const *names;
-  int size; /* values per value reference: 1, or the length of an FMI 3 array */
-} var_group;
-
-static const var_group groups[] = {
-  {NNFMU_VR_U, NNFMU_NU, KIND_INPUT, offsetof(nnfmu_values, u), nnfmu_u_names, 1},
-  {NNFMU_VR_Y, NNFMU_NY, KIND_OUTPUT, offsetof(nnfmu_values, y), nnfmu_y_names, 1},
-  {NNFMU_VR_Y_START, NNFMU_NY, KIND_FIXED, offsetof(nnfmu_values, y_start), nnfmu_y_start_names, 1},
-  {NNFMU_VR_P, NNFMU_NP, KIND_TUNABLE, offsetof(nnfmu_values, p), nnfmu_p_names, 1},
-  {NNFMU_VR_PAST, NNFMU_N_PAST_VR, KIND_FIXED, offsetof(nnfmu_values, past), nnfmu_past_names, NNFMU_PAST_PER_VR},
-};
-
-#define READABLE (MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR | MODE_EVENT | MODE_CONTINUOUS)
-#define TUNABLE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_EVENT | MODE_CONTINUOUS)
-#define FIXED (MODE_INSTANTIATED | MODE_INITIALIZATION)
-
-static const var_group *find_group(unsigned long vr, int *index) {
-  size_t g;
-  for (g = 0; g < sizeof groups / sizeof groups[0]; ++g)
-    if (vr >= groups[g].first && vr < groups[g].first + (unsigned long)groups[g].count) {
-      *index = (int)(vr - groups[g].first);
-      return &groups[g];
-    }
-  return NULL;
-}
-
-static double *group_values(nnfmu_values *v, const var_group *g) { return (double *)((char *)v + g->offset); }
-
-int nnfmu_is_output(unsigned long vr) { return vr >= NNFMU_VR_Y && vr < NNFMU_VR_Y + NNFMU_NY; }
-
-size_t nnfmu_real_size(unsigned long vr) {
-  int i;
-  const var_group *g = find_group(vr, &i);
-  return g ? (size_t)g->size : 1;
-}
-
-static nnfmu_status unknown_vr(nnfmu_instance *inst, const char *caller, unsigned long vr) {
-  return nnfmu_error(inst, "%s: unknown value reference %lu; this FMU has value references 0 to %d", caller,
-                     vr, NNFMU_N_VR - 1);
-}
-
-/* Model Exchange: parameters change in event mode only, where the importer restarts its solver. */
-static nnfmu_status parameter_in_continuous_time(nnfmu_instance *inst, const char *caller) {
-  return nnfmu_error(inst, "%s: parameters can be set in event mode but not in continuous-time mode; call "
-                     "enterEventMode first", caller);
-}
-
-static nnfmu_status wrong_type(nnfmu_instance *inst, const char *caller, unsigned long vr) {
-  const char *what = vr == NNFMU_VR_MAX_SAMPLES ? "max_samples_per_step is an Integer (FMI 3: Int32)"
-                     : vr == NNFMU_VR_RANGE_ERROR ? "input_range_error is a Boolean"
-                                                  : "it is a Real (FMI 3: Float64)";
-  return nnfmu_error(inst, "%s: value reference %lu has another type: %s", caller, vr, what);
-}
-
-nnfmu_status nnfmu_get_real(nnfmu_instance *inst, const char *caller, unsigned long vr, double *value) {
-  int i, k;
-  const var_group *g;
-  if (nnfmu_require(inst, caller, READABLE) != NNFMU_OK) return NNFMU_ERROR;
-#ifdef NNFMU_MODEL_EXCHANGE
-  if (nnfmu_me_owns(inst, vr)) return nnfmu_me_get_real(inst, caller, vr, value);
-#endif
-  if (vr == NNFMU_VR_TIME) *value = inst->v.time;
-  else if (vr == NNFMU_VR_TS) *value = NNFMU_TS;
-  else if ((g = find_group(vr, &i)) == NULL)
-    return vr == NNFMU_VR_MAX_SAMPLES || vr == NNFMU_VR_RANGE_ERROR ? wrong_type(inst, caller, vr)
-                                                                     : unknown_vr(inst, caller, vr);
-  else if (g->kind == KIND_OUTPUT && inst->v.samples == 0) *value = inst->v.y_start[i]; /* y(t0) = y0 */
-  else for (k = 0; k < g->size; ++k) value[k] = group_values(&inst->v, g)[i * g->size + k];
-  return NNFMU_OK;
-}
-
-nnfmu_status nnfmu_set_real(nnfmu_instance *inst, const char *caller, unsigned long vr, const double *value) {
-  int i, k;
-  const var_group *g;
-  if (nnfmu_require(inst, caller, TUNABLE) != NNFMU_OK) return NNFMU_ERROR;
-  if (vr == NNFMU_VR_TIME)
-    return nnfmu_error(inst, "%s: time (value reference 0) is the independent variable and cannot be set", caller);
-  if (vr == NNFMU_VR_TS)
-    return nnfmu_error(inst, "%s: Ts (value reference 1) is a constant, Ts = %g s, and cannot be set", caller,
-                       NNFMU_TS);
-#ifdef NNFMU_MODEL_EXCHANGE
-  if (nnfmu_me_owns(inst, vr) && !nnfmu_is_output(vr)) return nnfmu_me_refuse_set(inst, caller, vr);
-#endif
-  if ((g = find_group(vr, &i)) == NULL)
-    return vr == NNFMU_VR_MAX_SAMPLES || vr == NNFMU_VR_RANGE_ERROR ? wrong_type(inst, caller, vr)
-                                                                     : unknown_vr(inst, caller, vr);
-  if (g->kind == KIND_OUTPUT)
-    return nnfmu_error(inst, "%s: %s is an output and cannot be set; set %s for the initial output", caller,
-                       g->names[i], nnfmu_y_start_names[i]);
-  if (g->kind == KIND_FIXED && !(inst->v.mode & FIXED))
-    return nnfmu_error(inst, "%s: %s is a fixed parameter; set it before exitInitializationMode, or call reset "
-                       "first", caller, g->names[i]);
-  if (g->kind == KIND_TUNABLE && inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
-  for (k = 0; k < g->size; ++k) group_values(&inst->v, g)[i * g->size + k] = value[k];
-  return NNFMU_OK;
-}
-
-nnfmu_status nnfmu_get_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type, unsigned long vr,
-                           long long *value) {
-  if (nnfmu_require(inst, caller, READABLE) != NNFMU_OK) return NNFMU_ERROR;
-  if (type == NNFMU_INTEGER && vr == NNFMU_VR_MAX_SAMPLES) *value = inst->v.max_samples;
-  else if (type == NNFMU_BOOLEAN && vr == NNFMU_VR_RANGE_ERROR) *value = inst->v.range_error;
-  else return vr < NNFMU_N_VR ? wrong_type(inst, caller, vr) : unknown_vr(inst, caller, vr);
-  return NNFMU_OK;
-}
-
-nnfmu_status nnfmu_set_int(nnfmu_instance *inst, const char *caller, nnfmu_int_type type, unsigned long vr,
-                           long long value) {
-  if (nnfmu_require(inst, caller, TUNABLE) != NNFMU_OK) return NNFMU_ERROR;
-  if (inst->v.mode == MODE_CONTINUOUS) return parameter_in_continuous_time(inst, caller);
-  if (type == NNFMU_INTEGER && vr == NNFMU_VR_MAX_SAMPLES) {
-    if (value < 1)
-      return nnfmu_error(inst, "%s: max_samples_per_step must be at least 1 but was %lld", caller, value);
-    inst->v.max_samples = value;
-  } else if (type == NNFMU_BOOLEAN && vr == NNFMU_VR_RANGE_ERROR) {
-    inst->v.range_error = value != 0;
-  } else {
-    return vr < NNFMU_N_VR ? wrong_type(inst, caller, vr) : unknown_vr(inst, caller, vr);
-  }
   return NNFMU_OK;
 }

@@ -3,9 +3,11 @@
  * Hand-written once and reviewed; the model's maths lives in the CasADi-generated model_casadi.c
  * and its sizes, value references, ranges and names in the generated nnfmu_model.h. The core keeps
  * no mutable globals: an instance owns all of its state, so several instances run side by side.
- * It owns the bookkeeping (time, samples, inputs held, the state machine, FMU states, logging);
- * the FMI 2 and FMI 3 files only translate types and call it. The user-level reference is
- * docs/fmu.md; in short:
+ * It owns the bookkeeping (time, samples, inputs held, the state machine of both interfaces, FMU
+ * states, logging); the FMI 2 and FMI 3 files only translate types and call it. One framework for
+ * co-simulation and Model Exchange, as in the FMI Reference FMUs: every FMU compiles the same files,
+ * an instance knows its interface from nnfmu_instantiate, and the model supplies only its maths
+ * (init and step; its ODE, if it has one). The user-level reference is docs/fmu.md; in short:
  *
  * - Time is counted in whole samples from the start time t0: sample k is at t0 + k * Ts. A
  *   communication point counts as reaching a sample instant when it is at most a tolerance before
@@ -26,6 +28,20 @@
  *   A serialized state carries a checksum, and every field is checked when it is read back; a
  *   refused state is an Error that leaves the instance as it was.
  * - NULL pointer arguments (arrays with a nonzero count included) are an Error with a message.
+ *
+ * Model Exchange (nnfmu_me.c; docs/fmu-platforms.md), for FMUs of models with an ODE xdot = f(x, u, p),
+ * y = g(x, p) (NNFMU_HAS_ODE in nnfmu_model.h; without one, Model Exchange is refused with a message):
+ * - The state x is the co-simulation step's: x0 = init(y0, u0, p) is computed when initialization ends,
+ *   from the <y>_start parameters and the inputs then; until then the states read as that formula gives.
+ * - Modes: after exitInitializationMode the instance is in event mode; enterContinuousTimeMode and
+ *   enterEventMode switch. The model has no event indicators, no time events and no discrete states.
+ * - Inputs may be set in event and continuous-time mode; tunable parameters in event mode only.
+ * - getDerivatives guards the inputs as doStep does: a Warning, and one message per excursion, for an
+ *   input outside [min, max] (an Error with input_range_error), an Error for non-finite values.
+ * - An event in which an input or a tunable parameter changed reports valuesOfContinuousStatesChanged
+ *   once, so that every importer restarts its integrator there (the states themselves keep their values).
+ * - Directional derivatives: unknowns are derivatives and outputs, knowns are states and inputs, in
+ *   event and continuous-time mode of a Model Exchange instance.
  */
 #ifndef NNFMU_CORE_H
 #define NNFMU_CORE_H
@@ -50,8 +66,13 @@ typedef void (*nnfmu_log_sink)(void *env, const char *instance_name, nnfmu_statu
 
 typedef struct nnfmu_instance nnfmu_instance;
 
-/* Lifecycle. nnfmu_instantiate logs through `sink` and returns NULL on a wrong token or no memory. */
-NNFMU_INTERNAL nnfmu_instance *nnfmu_instantiate(const char *instance_name, const char *token,
+/* The interface an instance is instantiated for. */
+typedef enum { NNFMU_INTERFACE_CS, NNFMU_INTERFACE_ME } nnfmu_interface;
+
+/* Lifecycle. nnfmu_instantiate logs through `sink` and returns NULL on Model Exchange for an FMU without an ODE,
+ * a wrong token or no memory; `caller` names the FMI function in those messages. */
+NNFMU_INTERNAL nnfmu_instance *nnfmu_instantiate(const char *caller, nnfmu_interface interface_type,
+                                                 const char *instance_name, const char *token,
                                                  nnfmu_log_sink sink, void *env, int logging_on);
 NNFMU_INTERNAL void nnfmu_free(nnfmu_instance *inst);
 NNFMU_INTERNAL void nnfmu_set_logging(nnfmu_instance *inst, int logging_on);
@@ -87,6 +108,33 @@ NNFMU_INTERNAL size_t nnfmu_serialized_size(void);
 NNFMU_INTERNAL nnfmu_status nnfmu_serialize(nnfmu_instance *inst, const void *state, unsigned char *bytes, size_t size);
 NNFMU_INTERNAL nnfmu_status nnfmu_deserialize(nnfmu_instance *inst, const unsigned char *bytes, size_t size,
                                               void **state);
+
+/* Model Exchange. In an FMU without an ODE each is an Error that says so; directional derivatives also need a
+ * Model Exchange instance, and the rest follow the modes of FMI (so on a co-simulation instance of an FMU
+ * with an ODE, the states read in initialization mode, and the nominals and the state count always). */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_set_time(nnfmu_instance *inst, const char *caller, double time);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_set_states(nnfmu_instance *inst, const char *caller, const double *x, size_t n);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_get_states(nnfmu_instance *inst, const char *caller, double *x, size_t n);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_get_derivatives(nnfmu_instance *inst, const char *caller, double *dx, size_t n);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_get_nominals(nnfmu_instance *inst, const char *caller, double *nominals,
+                                                  size_t n);
+/* The model has no event indicators: n must be 0. */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_event_indicators(nnfmu_instance *inst, const char *caller, size_t n);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_number_of_states(nnfmu_instance *inst, const char *caller, size_t *n);
+/* Mode changes: enter event mode, update the (absent) discrete states, enter continuous-time mode. */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller);
+/* *restart: whether an input or a tunable parameter changed since the event began (or since the last call), so
+ * that the right-hand side jumped and the importer must restart its integrator: the wrappers report it as
+ * valuesOfContinuousStatesChanged, the flag on which importers such as fmusim restart (docs/fmu.md). */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, int *restart);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_continuous_time_mode(nnfmu_instance *inst, const char *caller);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller);
+/* sensitivity[i] = sum_j d unknowns[i] / d knowns[j] * seed[j] (value references; FMI 2 and 3 both use
+ * 32-bit unsigned ones). */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_directional_derivative(nnfmu_instance *inst, const char *caller,
+                                                            const unsigned int *unknowns, size_t n_unknowns,
+                                                            const unsigned int *knowns, size_t n_knowns,
+                                                            const double *seed, double *sensitivity);
 
 /* An Error: log it (always) and put the instance in the error state; returns NNFMU_ERROR. */
 NNFMU_INTERNAL nnfmu_status nnfmu_error(nnfmu_instance *inst, const char *fmt, ...);

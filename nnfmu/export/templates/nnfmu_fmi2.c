@@ -1,18 +1,11 @@
-/* nnfmu FMI 2.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
- * FMI 2 types and calls the core, which checks the state machine and does the work. FMUs of
- * continuous-time models add the Model Exchange entry points of nnfmu_fmi2_me.c. */
+/* nnfmu FMI 2.0 entry points over the shared core (nnfmu_core.h), common and co-simulation ones: each
+ * translates the FMI 2 types and calls the core, which checks the state machine and does the work. The
+ * Model Exchange entry points are in nnfmu_fmi2_me.c; every FMU has both files, and the core refuses
+ * Model Exchange in an FMU whose model has no ODE. */
 #include <stddef.h>
 #include <stdlib.h>
 
 #include "nnfmu_fmi2.h"
-#ifdef NNFMU_MODEL_EXCHANGE
-#include "nnfmu_me.h"
-#define INTERFACES "co-simulation and model exchange"
-#define OFFERED(type) ((type) == fmi2CoSimulation || (type) == fmi2ModelExchange)
-#else
-#define INTERFACES "co-simulation only (fmuType = fmi2CoSimulation)"
-#define OFFERED(type) ((type) == fmi2CoSimulation)
-#endif
 
 /* The core hands over finished messages; FMI 2 loggers read them as printf formats (the core removed
  * every '%'), so the message itself is the format. */
@@ -34,22 +27,22 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
   (void)visible;
   le.logger = functions ? functions->logger : NULL;
   le.environment = functions ? functions->componentEnvironment : NULL;
-  if (!OFFERED(fmuType)) {
-    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName, "fmi2Instantiate: this FMU supports " INTERFACES);
+  if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+    nnfmu_log_early(le.logger ? fmi2_sink : NULL, &le, instanceName, "fmi2Instantiate: fmuType must be "
+                    "fmi2ModelExchange or fmi2CoSimulation, got %d", (int)fmuType);
     return NULL;
   }
   inst = (fmi2_instance *)calloc(1, sizeof *inst);
   if (!inst) return NULL;
   inst->magic = FMI2_INSTANCE_MAGIC;
   inst->le = le;
-  inst->core = nnfmu_instantiate(instanceName, fmuGUID, le.logger ? fmi2_sink : NULL, &inst->le, loggingOn);
+  inst->core = nnfmu_instantiate("fmi2Instantiate", fmuType == fmi2ModelExchange ? NNFMU_INTERFACE_ME
+                                 : NNFMU_INTERFACE_CS, instanceName, fmuGUID, le.logger ? fmi2_sink : NULL,
+                                 &inst->le, loggingOn);
   if (!inst->core) {
     free(inst);
     return NULL;
   }
-#ifdef NNFMU_MODEL_EXCHANGE
-  if (fmuType == fmi2ModelExchange) nnfmu_me_select(inst->core);
-#endif
   return inst;
 }
 
@@ -211,15 +204,6 @@ static fmi2Status unsupported(fmi2Component c, const char *caller, const char *w
   CHECK_INSTANCE();
   return (fmi2Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
-
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi2_me.c */
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
-                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
-                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
-  (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
-  return unsupported(c, "fmi2GetDirectionalDerivative", "providesDirectionalDerivative is false");
-}
-#endif
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {

@@ -1,11 +1,10 @@
-/* nnfmu FMI 2.0 wrapper: what nnfmu_fmi2.c (common and co-simulation functions) and nnfmu_fmi2_me.c (Model
- * Exchange, in FMUs of continuous-time models) share. */
+/* nnfmu FMI 2.0 wrapper, in every FMU: what nnfmu_fmi2.c (common and co-simulation functions) and
+ * nnfmu_fmi2_me.c (Model Exchange functions) share. The core decides what an FMU offers. */
 #ifndef NNFMU_FMI2_H
 #define NNFMU_FMI2_H
 
 #include "fmi2Functions.h"
 #include "nnfmu_core.h"
-#include "nnfmu_model.h" /* NNFMU_MODEL_EXCHANGE: this FMU offers Model Exchange too */
 
 /* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
 typedef struct {

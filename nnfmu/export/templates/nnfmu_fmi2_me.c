@@ -1,9 +1,9 @@
-/* nnfmu FMI 2.0 Model Exchange entry points (FMUs of continuous-time models only) over the core's
- * Model Exchange part (nnfmu_me.h). fmi2Instantiate (nnfmu_fmi2.c) accepts fmi2ModelExchange here. */
+/* nnfmu FMI 2.0 Model Exchange entry points, in every FMU, over the core's Model Exchange part
+ * (nnfmu_core.h, nnfmu_me.c), and fmi2GetDirectionalDerivative. In an FMU without an ODE, fmi2Instantiate
+ * (nnfmu_fmi2.c) refuses fmi2ModelExchange and each of these is an Error that says why. */
 #include <stddef.h>
 
 #include "nnfmu_fmi2.h"
-#include "nnfmu_me.h"
 
 fmi2Status fmi2EnterEventMode(fmi2Component c) {
   CHECK_INSTANCE();

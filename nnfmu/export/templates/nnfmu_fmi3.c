@@ -1,7 +1,8 @@
-/* nnfmu FMI 3.0 Co-Simulation entry points over the shared core (nnfmu_core.h): each translates the
- * FMI 3 types and calls the core, which checks the state machine and does the work. Co-simulation has no
- * event mode; FMUs of continuous-time models add Model Exchange (nnfmu_fmi3_me.c). Every FMI 3 function
- * is exported (importers look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
+/* nnfmu FMI 3.0 entry points over the shared core (nnfmu_core.h), common and co-simulation ones: each
+ * translates the FMI 3 types and calls the core, which checks the state machine and does the work.
+ * Co-simulation has no event mode. The Model Exchange entry points are in nnfmu_fmi3_me.c (the core
+ * refuses Model Exchange in an FMU whose model has no ODE). Every FMI 3 function is exported (importers
+ * look them all up); those that do not apply are in nnfmu_fmi3_unsupported.c. */
 #include <stddef.h>
 #include <stdlib.h>
 
@@ -18,7 +19,6 @@ fmi3Status nnfmu_fmi3_unsupported(fmi3Instance instance, const char *caller, con
   CHECK_INSTANCE();
   return (fmi3Status)nnfmu_error(INSTANCE, "%s is not supported: %s", caller, why);
 }
-
 
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
@@ -53,28 +53,14 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
   if (!inst) return NULL;
   inst->magic = FMI3_INSTANCE_MAGIC;
   inst->le = le;
-  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
-                                 loggingOn);
+  inst->core = nnfmu_instantiate("fmi3InstantiateCoSimulation", NNFMU_INTERFACE_CS, instanceName, instantiationToken,
+                                 logMessage ? nnfmu_fmi3_sink : NULL, &inst->le, loggingOn);
   if (!inst->core) {
     free(inst);
     return NULL;
   }
   return inst;
 }
-
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                          fmi3InstanceEnvironment instanceEnvironment,
-                                          fmi3LogMessageCallback logMessage) {
-  logger_env le;
-  (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-  le.log_message = logMessage;
-  le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateModelExchange: " NO_MX);
-  return NULL;
-}
-#endif
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
                                                fmi3String resourcePath, fmi3Boolean visible,
@@ -87,7 +73,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
   (void)lockPreemption; (void)unlockPreemption;
   le.log_message = logMessage;
   le.environment = instanceEnvironment;
-  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: " NO_MX);
+  nnfmu_log_early(logMessage ? nnfmu_fmi3_sink : NULL, &le, instanceName, "fmi3InstantiateScheduledExecution: this FMU "
+                  "offers co-simulation and, if its model has an ODE, Model Exchange");
   return NULL;
 }
 
@@ -221,61 +208,6 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     if (nnfmu_set_int(INSTANCE, "fmi3SetBoolean", NNFMU_BOOLEAN, valueReferences[i], values[i]) != NNFMU_OK)
       return fmi3Error;
   return fmi3OK;
-}
-
-/* Getters and setters of the types this FMU does not have: fine when empty, an error otherwise. */
-#define NO_VARIABLES_OF_TYPE(function, value_type)                                                          \
-  fmi3Status function(fmi3Instance instance, const fmi3ValueReference valueReferences[],                  \
-                      size_t nValueReferences, value_type values[], size_t nValues) {                     \
-    (void)valueReferences; (void)values; (void)nValues;                                                   \
-    CHECK_INSTANCE();                                                                                     \
-    return nValueReferences ? nnfmu_fmi3_unsupported(instance, #function, NO_TYPE) : fmi3OK;                         \
-  }
-NO_VARIABLES_OF_TYPE(fmi3GetFloat32, fmi3Float32)
-NO_VARIABLES_OF_TYPE(fmi3GetInt8, fmi3Int8)
-NO_VARIABLES_OF_TYPE(fmi3GetUInt8, fmi3UInt8)
-NO_VARIABLES_OF_TYPE(fmi3GetInt16, fmi3Int16)
-NO_VARIABLES_OF_TYPE(fmi3GetUInt16, fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3GetUInt32, fmi3UInt32)
-NO_VARIABLES_OF_TYPE(fmi3GetInt64, fmi3Int64)
-NO_VARIABLES_OF_TYPE(fmi3GetUInt64, fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3GetString, fmi3String)
-NO_VARIABLES_OF_TYPE(fmi3SetFloat32, const fmi3Float32)
-NO_VARIABLES_OF_TYPE(fmi3SetInt8, const fmi3Int8)
-NO_VARIABLES_OF_TYPE(fmi3SetUInt8, const fmi3UInt8)
-NO_VARIABLES_OF_TYPE(fmi3SetInt16, const fmi3Int16)
-NO_VARIABLES_OF_TYPE(fmi3SetUInt16, const fmi3UInt16)
-NO_VARIABLES_OF_TYPE(fmi3SetUInt32, const fmi3UInt32)
-NO_VARIABLES_OF_TYPE(fmi3SetInt64, const fmi3Int64)
-NO_VARIABLES_OF_TYPE(fmi3SetUInt64, const fmi3UInt64)
-NO_VARIABLES_OF_TYPE(fmi3SetString, const fmi3String)
-
-fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
-  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
-  CHECK_INSTANCE();
-  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetBinary", NO_TYPE) : fmi3OK;
-}
-
-fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
-  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
-  CHECK_INSTANCE();
-  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetBinary", NO_TYPE) : fmi3OK;
-}
-
-fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                        fmi3Clock values[]) {
-  (void)valueReferences; (void)values;
-  CHECK_INSTANCE();
-  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetClock", NO_CLOCKS) : fmi3OK;
-}
-
-fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
-                        const fmi3Clock values[]) {
-  (void)valueReferences; (void)values;
-  CHECK_INSTANCE();
-  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetClock", NO_CLOCKS) : fmi3OK;
 }
 
 /* Outputs never depend on the inputs of the same instant (no feedthrough). */

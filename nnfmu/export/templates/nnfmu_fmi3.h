@@ -1,10 +1,11 @@
-/* nnfmu FMI 3.0 wrapper: what nnfmu_fmi3.c and nnfmu_fmi3_unsupported.c share. */
+/* nnfmu FMI 3.0 wrapper, in every FMU: what nnfmu_fmi3.c (common and co-simulation functions),
+ * nnfmu_fmi3_me.c (Model Exchange functions) and nnfmu_fmi3_unsupported.c share. The core decides what
+ * an FMU offers. */
 #ifndef NNFMU_FMI3_H
 #define NNFMU_FMI3_H
 
 #include "fmi3Functions.h"
 #include "nnfmu_core.h"
-#include "nnfmu_model.h" /* NNFMU_MODEL_EXCHANGE: this FMU offers Model Exchange too (nnfmu_fmi3_me.c) */
 
 /* The importer's logger and its environment; the core keeps a pointer to it as its `env`. */
 typedef struct {
@@ -28,7 +29,6 @@ typedef struct {
 #define NOT_NULL(caller, pointer, count) \
   if (nnfmu_not_null(INSTANCE, caller, #pointer, pointer, count) != NNFMU_OK) return fmi3Error
 
-#define NO_MX "this FMU is for co-simulation only"
 /* The FMI 3 logger sink, shared with nnfmu_fmi3_me.c's instantiate. */
 NNFMU_INTERNAL void nnfmu_fmi3_sink(void *env, const char *instance_name, nnfmu_status status, const char *category,
                                     const char *message);

@@ -1,10 +1,11 @@
-/* nnfmu FMI 3.0 Model Exchange entry points (FMUs of continuous-time models only) over the core's
- * Model Exchange part (nnfmu_me.h). Without them, nnfmu_fmi3.c and nnfmu_fmi3_unsupported.c export stubs. */
+/* nnfmu FMI 3.0 Model Exchange entry points, in every FMU, over the core's Model Exchange part (nnfmu_core.h,
+ * nnfmu_me.c), with fmi3EnterEventMode, fmi3UpdateDiscreteStates and fmi3GetDirectionalDerivative. In an FMU
+ * without an ODE, fmi3InstantiateModelExchange is refused by the core and each of these is an Error that
+ * says why. */
 #include <stddef.h>
 #include <stdlib.h>
 
 #include "nnfmu_fmi3.h"
-#include "nnfmu_me.h"
 
 /* The core takes FMI 2 and 3 value references alike: both are 32-bit unsigned integers. */
 typedef char nnfmu_vr_is_unsigned_int[sizeof(fmi3ValueReference) == sizeof(unsigned int) ? 1 : -1];
@@ -20,13 +21,12 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
   inst->magic = FMI3_INSTANCE_MAGIC;
   inst->le.log_message = logMessage;
   inst->le.environment = instanceEnvironment;
-  inst->core = nnfmu_instantiate(instanceName, instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le,
-                                 loggingOn);
+  inst->core = nnfmu_instantiate("fmi3InstantiateModelExchange", NNFMU_INTERFACE_ME, instanceName,
+                                 instantiationToken, logMessage ? nnfmu_fmi3_sink : NULL, &inst->le, loggingOn);
   if (!inst->core) {
     free(inst);
     return NULL;
   }
-  nnfmu_me_select(inst->core);
   return inst;
 }
 
@@ -52,7 +52,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
   *discreteStatesNeedUpdate = fmi3False; /* no discrete states, no time events */
   *terminateSimulation = fmi3False;
   *nominalsOfContinuousStatesChanged = fmi3False;
-  *valuesOfContinuousStatesChanged = restart ? fmi3True : fmi3False; /* inputs jumped: restart (nnfmu_me.h) */
+  *valuesOfContinuousStatesChanged = restart ? fmi3True : fmi3False; /* inputs jumped: restart (nnfmu_core.h) */
   *nextEventTimeDefined = fmi3False;
   *nextEventTime = 0.0;
   return fmi3OK;
@@ -119,8 +119,7 @@ fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventI
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
   CHECK_INSTANCE();
   NOT_NULL("fmi3GetNumberOfContinuousStates", nContinuousStates, 1);
-  *nContinuousStates = nnfmu_me_number_of_states();
-  return fmi3OK;
+  return (fmi3Status)nnfmu_me_number_of_states(INSTANCE, "fmi3GetNumberOfContinuousStates", nContinuousStates);
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,

@@ -1,16 +1,68 @@
-/* nnfmu FMI 3.0: the functions that do not apply to a co-simulation FMU without clocks or event mode.
- * They exist because importers look up the whole API; each logs why and returns fmi3Error. */
+/* nnfmu FMI 3.0: the functions that do not apply to this FMU, in every FMU: variables of the types it does
+ * not have, clocks, configuration mode, step mode after event mode, adjoint and output derivatives. They
+ * exist because importers look up the whole API; each logs why and returns fmi3Error (the getters and
+ * setters of absent types return fmi3OK when asked for no variables). */
 #include <stddef.h>
 
 #include "nnfmu_fmi3.h"
 
 #define U(x) (void)(x)
 
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
-  return nnfmu_fmi3_unsupported(instance, "fmi3EnterEventMode", NO_CLOCKS);
+/* Getters and setters of the types this FMU does not have: fine when empty, an error otherwise. */
+#define NO_VARIABLES_OF_TYPE(function, value_type)                                                          \
+  fmi3Status function(fmi3Instance instance, const fmi3ValueReference valueReferences[],                  \
+                      size_t nValueReferences, value_type values[], size_t nValues) {                     \
+    (void)valueReferences; (void)values; (void)nValues;                                                   \
+    CHECK_INSTANCE();                                                                                     \
+    return nValueReferences ? nnfmu_fmi3_unsupported(instance, #function, NO_TYPE) : fmi3OK;                         \
+  }
+NO_VARIABLES_OF_TYPE(fmi3GetFloat32, fmi3Float32)
+NO_VARIABLES_OF_TYPE(fmi3GetInt8, fmi3Int8)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt8, fmi3UInt8)
+NO_VARIABLES_OF_TYPE(fmi3GetInt16, fmi3Int16)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt16, fmi3UInt16)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt32, fmi3UInt32)
+NO_VARIABLES_OF_TYPE(fmi3GetInt64, fmi3Int64)
+NO_VARIABLES_OF_TYPE(fmi3GetUInt64, fmi3UInt64)
+NO_VARIABLES_OF_TYPE(fmi3GetString, fmi3String)
+NO_VARIABLES_OF_TYPE(fmi3SetFloat32, const fmi3Float32)
+NO_VARIABLES_OF_TYPE(fmi3SetInt8, const fmi3Int8)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt8, const fmi3UInt8)
+NO_VARIABLES_OF_TYPE(fmi3SetInt16, const fmi3Int16)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt16, const fmi3UInt16)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt32, const fmi3UInt32)
+NO_VARIABLES_OF_TYPE(fmi3SetInt64, const fmi3Int64)
+NO_VARIABLES_OF_TYPE(fmi3SetUInt64, const fmi3UInt64)
+NO_VARIABLES_OF_TYPE(fmi3SetString, const fmi3String)
+
+fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
+  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetBinary", NO_TYPE) : fmi3OK;
 }
-#endif
+
+fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
+  (void)valueReferences; (void)valueSizes; (void)values; (void)nValues;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetBinary", NO_TYPE) : fmi3OK;
+}
+
+fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        fmi3Clock values[]) {
+  (void)valueReferences; (void)values;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3GetClock", NO_CLOCKS) : fmi3OK;
+}
+
+fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                        const fmi3Clock values[]) {
+  (void)valueReferences; (void)values;
+  CHECK_INSTANCE();
+  return nValueReferences ? nnfmu_fmi3_unsupported(instance, "fmi3SetClock", NO_CLOCKS) : fmi3OK;
+}
+
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EnterStepMode",
                                 "without event mode the FMU is in step mode after initialization");
@@ -24,26 +76,7 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
   return nnfmu_fmi3_unsupported(instance, "fmi3EvaluateDiscreteStates", NO_CLOCKS);
 }
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
-                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
-                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
-                                    fmi3Float64 *nextEventTime) {
-  U(discreteStatesNeedUpdate); U(terminateSimulation); U(nominalsOfContinuousStatesChanged);
-  U(valuesOfContinuousStatesChanged); U(nextEventTimeDefined); U(nextEventTime);
-  return nnfmu_fmi3_unsupported(instance, "fmi3UpdateDiscreteStates", NO_CLOCKS);
-}
-#endif
 
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
-fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
-                                        const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
-                                        size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
-  U(unknowns); U(nUnknowns); U(knowns); U(nKnowns); U(seed); U(nSeed); U(sensitivity); U(nSensitivity);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetDirectionalDerivative",
-                                "providesDirectionalDerivatives is false");
-}
-#endif
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
@@ -104,49 +137,3 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
   U(clockReference); U(activationTime);
   return nnfmu_fmi3_unsupported(instance, "fmi3ActivateModelPartition", NO_CLOCKS);
 }
-
-/* Model exchange. */
-#ifndef NNFMU_MODEL_EXCHANGE /* else in nnfmu_fmi3_me.c */
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
-  return nnfmu_fmi3_unsupported(instance, "fmi3EnterContinuousTimeMode", NO_MX);
-}
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
-  U(noSetFMUStatePriorToCurrentPoint); U(enterEventMode); U(terminateSimulation);
-  return nnfmu_fmi3_unsupported(instance, "fmi3CompletedIntegratorStep", NO_MX);
-}
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
-  U(time);
-  return nnfmu_fmi3_unsupported(instance, "fmi3SetTime", NO_MX);
-}
-fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
-                                   size_t nContinuousStates) {
-  U(continuousStates); U(nContinuousStates);
-  return nnfmu_fmi3_unsupported(instance, "fmi3SetContinuousStates", NO_MX);
-}
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
-                                             size_t nContinuousStates) {
-  U(derivatives); U(nContinuousStates);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetContinuousStateDerivatives", NO_MX);
-}
-fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
-  U(eventIndicators); U(nEventIndicators);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetEventIndicators", NO_MX);
-}
-fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
-  U(continuousStates); U(nContinuousStates);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetContinuousStates", NO_MX);
-}
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t nContinuousStates) {
-  U(nominals); U(nContinuousStates);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetNominalsOfContinuousStates", NO_MX);
-}
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
-  U(nEventIndicators);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetNumberOfEventIndicators", NO_MX);
-}
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
-  U(nContinuousStates);
-  return nnfmu_fmi3_unsupported(instance, "fmi3GetNumberOfContinuousStates", NO_MX);
-}
-#endif /* NNFMU_MODEL_EXCHANGE */

@@ -1,5 +1,7 @@
-/* nnfmu FMU core, internal: the instance and what nnfmu_core.c, nnfmu_step.c and nnfmu_state.c share.
- * The FMI wrappers never see this header; they talk to the core through nnfmu_core.h. */
+/* nnfmu FMU core, internal: the instance (both interfaces: co-simulation and Model Exchange), the
+ * model's ODE as the core calls it, and what the core's files (nnfmu_core.c, nnfmu_variables.c,
+ * nnfmu_step.c, nnfmu_state.c, nnfmu_me.c) share. The FMI wrappers never see this header; they talk
+ * to the core through nnfmu_core.h. */
 #ifndef NNFMU_INSTANCE_H
 #define NNFMU_INSTANCE_H
 
@@ -10,6 +12,22 @@
 #define NNFMU_ALLOC(n) ((n) > 0 ? (n) : 1) /* C has no empty arrays */
 /* The largest max_samples_per_step: the largest Int32 an importer can set. It bounds every step loop. */
 #define NNFMU_MAX_SAMPLES_LIMIT 2147483647LL
+/* The continuous states Model Exchange exposes: the model state x if the model has an ODE, else none. */
+#define NNFMU_N_STATES (NNFMU_HAS_ODE ? NNFMU_NX : 0)
+
+/* The model's ODE, as the generated model_me_casadi.c provides it in every FMU (CasADi's calling
+ * convention; nnfmu_me_model.c compiles it). In FMUs of models without an ODE (NNFMU_HAS_ODE 0 in
+ * nnfmu_model.h) every entry is NULL and the core refuses Model Exchange. */
+typedef int (*nnfmu_casadi_eval)(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w,
+                                 int mem);
+typedef int (*nnfmu_casadi_work)(casadi_int *n_arg, casadi_int *n_res, casadi_int *n_iw, casadi_int *n_w);
+typedef struct {
+  nnfmu_casadi_eval rhs; /* (x, u(, p)) -> (xdot, y): the right-hand side and the outputs */
+  nnfmu_casadi_work rhs_work;
+  nnfmu_casadi_eval jvp; /* (x, u(, p), dx, du) -> (dxdot, dy): its forward derivative along one seed */
+  nnfmu_casadi_work jvp_work;
+} nnfmu_ode_code;
+NNFMU_INTERNAL extern const nnfmu_ode_code nnfmu_model_ode;
 
 /* The FMI modes as bit flags, so that a call names the set of modes it is allowed in. */
 typedef enum {
@@ -18,7 +36,7 @@ typedef enum {
   MODE_STEP = 4,
   MODE_TERMINATED = 8,
   MODE_ERROR = 16,
-  MODE_EVENT = 32,     /* Model Exchange (nnfmu_me.c) */
+  MODE_EVENT = 32,     /* Model Exchange: event mode */
   MODE_CONTINUOUS = 64 /* Model Exchange: continuous-time mode */
 } nnfmu_mode;
 #define ANY_MODE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_ERROR | MODE_EVENT | \
@@ -44,19 +62,30 @@ typedef struct {
   double x[NNFMU_ALLOC(NNFMU_NX)];
 } nnfmu_values;
 
+/* What Model Exchange evaluates and remembers besides the values (not part of an FMU state: every entry is
+ * recomputed from the values, and the event snapshot restarts when an event begins). */
+typedef struct {
+  double x_init[NNFMU_ALLOC(NNFMU_NX)]; /* init(y0, u, p) until initialization ends */
+  double xdot[NNFMU_ALLOC(NNFMU_NX)], y[NNFMU_ALLOC(NNFMU_NY)]; /* the last evaluation of the ODE */
+  double dx[NNFMU_ALLOC(NNFMU_NX)], du[NNFMU_ALLOC(NNFMU_NU)];   /* a directional derivative's seed */
+  double dxdot[NNFMU_ALLOC(NNFMU_NX)], dy[NNFMU_ALLOC(NNFMU_NY)]; /* and its sensitivity */
+  double u_event[NNFMU_ALLOC(NNFMU_NU)], p_event[NNFMU_ALLOC(NNFMU_NP)]; /* as when the event began */
+} nnfmu_ode_values;
+
 struct nnfmu_instance {
   char *name;
+  nnfmu_interface interface_type; /* given at instantiation: co-simulation or Model Exchange */
   nnfmu_log_sink sink;
   void *env;
   int logging_on;
   nnfmu_values v;
   double xa[NNFMU_ALLOC(NNFMU_NX)], xb[NNFMU_ALLOC(NNFMU_NX)], y_next[NNFMU_ALLOC(NNFMU_NY)]; /* step scratch */
   double y_past[NNFMU_ALLOC(NNFMU_NWIN * NNFMU_NY)], u_past[NNFMU_ALLOC(NNFMU_NWIN * NNFMU_NU)]; /* init's window */
-  const casadi_real **arg; /* CasADi's work arrays, sized by the generated *_work functions */
-  casadi_real **res;
+  nnfmu_ode_values ode; /* Model Exchange (nnfmu_me.c); a co-simulation instance reads x0 from x_init too */
+  const casadi_real **arg; /* CasADi's work arrays, sized by the generated *_work functions (init, step and */
+  casadi_real **res;       /* the ODE's alike: one is evaluated at a time) */
   casadi_int *iw;
   casadi_real *w;
-  void *me; /* the Model Exchange workspace (nnfmu_me.c) in FMUs of continuous-time models, else NULL */
   char message[1024];
 };
 
@@ -72,5 +101,14 @@ NNFMU_INTERNAL void nnfmu_start_values(nnfmu_values *v);
 NNFMU_INTERNAL double nnfmu_samples_by(const nnfmu_values *v, double t);
 /* Inputs and parameters finite (else an Error) and inputs inside [min, max] (else a Warning or an Error). */
 NNFMU_INTERNAL nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t);
+
+/* Model Exchange (nnfmu_me.c). The continuous states: x once initialization has ended (or a solver set it),
+ * before that init(y0, u, p) (nnfmu_ode_values.x_init). */
+NNFMU_INTERNAL const double *nnfmu_me_states(nnfmu_instance *inst);
+/* Evaluate the ODE into inst->ode.xdot and inst->ode.y, the inputs guarded as in doStep: NNFMU_OK, a Warning (an
+ * input outside its range) or an Error. */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_evaluate(nnfmu_instance *inst, const char *caller);
+/* exitInitializationMode of a Model Exchange instance: x = x0, and event mode. */
+NNFMU_INTERNAL void nnfmu_me_start(nnfmu_instance *inst);
 
 #endif /* NNFMU_INSTANCE_H */

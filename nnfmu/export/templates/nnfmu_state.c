@@ -10,9 +10,6 @@
 #include <string.h>
 
 #include "nnfmu_instance.h"
-#ifdef NNFMU_MODEL_EXCHANGE
-#include "nnfmu_me.h"
-#endif
 
 #define STATE_MAGIC 0x6e6e666d75737433ULL /* "nnfmust3": version 3 of the serialized layout */
 #define HEADER_WORDS 3                     /* magic, hash of the instantiation token, checksum of the payload */
@@ -38,18 +35,9 @@ static unsigned long long token_hash(void) {
 static int is_finite(double a) { return a - a == 0.0; }
 static int is_flag(int a) { return a == 0 || a == 1; }
 
-static int model_exchange(const nnfmu_instance *inst) {
-#ifdef NNFMU_MODEL_EXCHANGE
-  return nnfmu_me_interface(inst);
-#else
-  (void)inst;
-  return 0;
-#endif
-}
-
 /* NULL if v is a state an instance of this interface can be in; else what is wrong, in `why`. */
 static const char *check_values(const nnfmu_instance *inst, const nnfmu_values *v, char *why, size_t size) {
-  const int me = model_exchange(inst);
+  const int me = inst->interface_type == NNFMU_INTERFACE_ME;
   const int modes = MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_TERMINATED | MODE_ERROR |
                     (me ? MODE_EVENT | MODE_CONTINUOUS : MODE_STEP);
   const unsigned mode = (unsigned)v->mode;

@@ -4,9 +4,6 @@
 #include <string.h>
 
 #include "nnfmu_instance.h"
-#ifdef NNFMU_MODEL_EXCHANGE
-#include "nnfmu_me.h"
-#endif
 
 /* A communication point counts as reaching a sample instant at most this far before it: 1e-9 of the
  * magnitude of the time, at most 1e-3 Ts, and never less than 16 rounding units of the time. */
@@ -63,11 +60,7 @@ static nnfmu_status check_finite(nnfmu_instance *inst, const char *caller, doubl
 
 /* What returns the Warning while an input is outside its range, in the words of the interface. */
 static const char *warned_calls(const nnfmu_instance *inst) {
-#ifdef NNFMU_MODEL_EXCHANGE
-  if (nnfmu_me_interface(inst)) return "every evaluation of the derivatives";
-#endif
-  (void)inst;
-  return "every step";
+  return inst->interface_type == NNFMU_INTERFACE_ME ? "every evaluation of the derivatives" : "every step";
 }
 
 /* The valid-range guard: a Warning with one message per excursion and input, or an Error. */
