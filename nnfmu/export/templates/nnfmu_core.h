@@ -121,6 +121,7 @@ NNFMU_INTERNAL nnfmu_status nnfmu_me_get_nominals(nnfmu_instance *inst, const ch
 /* The model has no event indicators: n must be 0. */
 NNFMU_INTERNAL nnfmu_status nnfmu_me_event_indicators(nnfmu_instance *inst, const char *caller, size_t n);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_number_of_states(nnfmu_instance *inst, const char *caller, size_t *n);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_number_of_event_indicators(nnfmu_instance *inst, const char *caller, size_t *n);
 /* Mode changes: enter event mode, update the (absent) discrete states, enter continuous-time mode. */
 NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller);
 /* *restart: whether an input or a tunable parameter changed since the event began (or since the last call), so

@@ -112,8 +112,8 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
   CHECK_INSTANCE();
   NOT_NULL("fmi3GetNumberOfEventIndicators", nEventIndicators, 1);
-  *nEventIndicators = 0;
-  return fmi3OK;
+  return (fmi3Status)nnfmu_me_number_of_event_indicators(INSTANCE, "fmi3GetNumberOfEventIndicators",
+                                                         nEventIndicators);
 }
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {

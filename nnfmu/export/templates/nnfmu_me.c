@@ -100,6 +100,12 @@ nnfmu_status nnfmu_me_number_of_states(nnfmu_instance *inst, const char *caller,
   return NNFMU_OK;
 }
 
+nnfmu_status nnfmu_me_number_of_event_indicators(nnfmu_instance *inst, const char *caller, size_t *n) {
+  if (has_ode(inst, caller) != NNFMU_OK) return NNFMU_ERROR;
+  *n = 0;
+  return NNFMU_OK;
+}
+
 nnfmu_status nnfmu_me_set_time(nnfmu_instance *inst, const char *caller, double time) {
   if (require(inst, caller, AFTER_INIT) != NNFMU_OK) return NNFMU_ERROR;
   if (!is_finite(time)) return nnfmu_error(inst, "%s: the time must be finite but was %g", caller, time);
