@@ -45,7 +45,7 @@ def fuse_on_cpu(monkeypatch):
     return install
 
 
-def test_fused_code_is_what_evaluates_and_compiles_once(fuse_on_cpu):
+def test_fused_code_is_what_evaluates_compiled_once_for_every_batch_size(fuse_on_cpu, monkeypatch):
     ran = []
 
     def counting(fn):
@@ -55,10 +55,11 @@ def test_fused_code_is_what_evaluates_and_compiles_once(fuse_on_cpu):
         return run
     calls = fuse_on_cpu(counting)
     ode = sx_to_torch(physics_system("valve").ode)
-    plain = ode.evaluate(_valve_ode_inputs())  # fused: the stand-in runs the same code
-    again = ode(*_valve_ode_inputs())
-    assert len(calls) == 1 and calls[0] == {"fullgraph": True} and len(ran) == 2
-    torch.testing.assert_close(again[0], plain[0], rtol=0, atol=0)
+    fused = [ode.evaluate(_valve_ode_inputs(5)), ode(*_valve_ode_inputs(2))]  # the stand-in runs the code as given
+    assert len(calls) == 1 and calls[0] == {"fullgraph": True, "dynamic": True} and len(ran) == 2
+    monkeypatch.setattr(casadi_torch, "FUSED_DEVICES", ())
+    for out, batch in zip(fused, (5, 2)):
+        torch.testing.assert_close(out[0], ode.evaluate(_valve_ode_inputs(batch))[0], rtol=0, atol=0)
 
 
 def test_a_failing_compiler_warns_once_and_the_numbers_stay(fuse_on_cpu, monkeypatch):

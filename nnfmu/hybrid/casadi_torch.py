@@ -183,7 +183,7 @@ class TorchFunction(torch.nn.Module):
         batch = first.shape[:-1] if inputs else torch.Size()
         if self._fuses(key[1]):
             try:
-                return self._fused(self._constants[key], key[0], key[1], batch, *inputs)
+                return self._fused(self._constants[key], key[0], key[1], *inputs)
             except Exception as exc:  # noqa: BLE001 (torch.compile's failures have no common type)
                 self._fusing_failed = True
                 warnings.warn(f"{self.name}: torch.compile cannot fuse the translated operations on {key[1]} "
@@ -194,10 +194,13 @@ class TorchFunction(torch.nn.Module):
     def _fuses(self, device: torch.device) -> bool:
         """Whether to run the code through torch.compile: "casadi" gradients on a CUDA device (module docstring)."""
         if (device.type not in FUSED_DEVICES or self.gradients != "casadi" or self._fusing_failed
-                or os.environ.get(ENV_SWITCH, "1") == "0"):
+                or not self.numel_in or os.environ.get(ENV_SWITCH, "1") == "0"):
             return False
         if self._fused is None:
-            self._fused = torch.compile(self._compiled, fullgraph=True)
+            # One compilation for every batch size (dynamic shapes), of a function object of its own: torch.compile
+            # caches by code object, and all translated functions sharing one would exhaust its recompile limit.
+            self._fused = torch.compile(_compile(_batch_from_input(self._generated), self.name), fullgraph=True,
+                                        dynamic=True)
         return True
 
     def reverse(self, needed: tuple[bool, ...]) -> "TorchFunction":
@@ -233,6 +236,21 @@ class TorchFunction(torch.nn.Module):
         if len(args) != len(self.name_in):
             raise ShapeError(f"{self.name}: expected {len(self.name_in)} inputs {list(self.name_in)}, got {len(args)}")
         return list(args)
+
+
+def _batch_from_input(generated: GeneratedSource) -> GeneratedSource:
+    """The same function with the batch shape read from its first input, ``(c, dt, dev, a0, ...)``.
+
+    The batch shape as an argument would be a Python value that torch.compile specialises on; read from a
+    tensor it stays symbolic, so one compilation serves the training batch, the last one and validation.
+    """
+    header, body = generated.source.split("\n", 1)
+    prefix = f"def {generated.function_name}(c, dt, dev, batch, a0"
+    if not header.startswith(prefix):
+        raise ExportError(f"unexpected generated header {header!r}")  # a change of _sx_source's layout
+    header = header.replace(", batch, a0", ", a0", 1)
+    return GeneratedSource(f"{header}\n    batch = a0.shape[:-1]\n{body}", generated.function_name,
+                           generated.constants)
 
 
 def _compile(generated: GeneratedSource, name: str):
