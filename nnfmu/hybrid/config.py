@@ -31,8 +31,8 @@ from typing import Mapping
 
 from nnfmu.errors import ConfigError, ShapeError, UnknownOptionError
 from nnfmu.hybrid.compiled_torch import BACKENDS
-from nnfmu.hybrid.parameters import (document_system, document_text, kinematic_states, normalise_physics_params,
-                                     physics_system, registered_defaults)
+from nnfmu.hybrid.parameters import (document_system, document_text, ignorable_states, kinematic_states,
+                                     normalise_physics_params, physics_system, registered_defaults)
 from nnfmu.hybrid.parameters import load_physics_params  # noqa: F401  (nnfmu.hybrid exports it from here)
 from nnfmu.models.config import ACTIVATIONS, ModelConfig
 from nnfmu.physics import PhysicsSystem
@@ -89,6 +89,13 @@ class HybridConfig(ModelConfig):
         :class:`nnfmu.physics.PhysicsEntry`; for a model the registry does not know, every state except the
         kinematic identities, those whose derivative is exactly another state such as ``dpos/dt = v``
         (:func:`nnfmu.hybrid.parameters.kinematic_states`), or every state if that leaves none).
+    correction_inputs : tuple of str or None
+        States the correction network sees, besides the inputs (the others' first-layer weights stay zero,
+        :func:`~nnfmu.hybrid.parameters.hide_state_inputs`). None: every state for a registered model; for
+        any other, every state some derivative of the ODE depends on, leaving out the ignorable ones
+        (:func:`~nnfmu.hybrid.parameters.ignorable_states`: a position on a rail, whose value wanders beyond
+        the training range on an integrating plant), or every state if that leaves none. A stored config
+        without this field (from before it) sees every state, as it was trained.
     correction_time : float or None
         Seconds; ``delta_i = state_scale_i / correction_time * N_i`` (None: the registered model's
         default; :data:`DEFAULT_CORRECTION_SAMPLES` sample times of the physics for a model the registry
@@ -109,6 +116,7 @@ class HybridConfig(ModelConfig):
     train_physics_gain: float = 10.0
     correction: str = "derivative"
     corrected_states: tuple | None = None
+    correction_inputs: tuple | None = None
     correction_time: float | None = None
     n_sub: int | None = None
     physics_backend: str = "compiled"
@@ -140,6 +148,11 @@ class HybridConfig(ModelConfig):
         self._check_names("corrected_states", [v.name for v in system.states], "state")
         if not self.corrected_states:
             raise ConfigError("corrected_states is empty: the network would correct nothing; name at least one state")
+        if self.correction_inputs is None:
+            states = tuple(v.name for v in system.states)
+            ignorable = () if entry is not None else ignorable_states(system)
+            object.__setattr__(self, "correction_inputs", tuple(n for n in states if n not in ignorable) or states)
+        self._check_names("correction_inputs", [v.name for v in system.states], "state")
         if self.correction_time is None:
             default = entry.correction_time if entry is not None else None
             object.__setattr__(self, "correction_time", default or DEFAULT_CORRECTION_SAMPLES * system.Ts)
@@ -263,4 +276,13 @@ class HybridConfig(ModelConfig):
         d["physics_params"] = dict(self.physics_params)
         d["train_physics"] = list(self.train_physics)
         d["corrected_states"] = list(self.corrected_states)
+        d["correction_inputs"] = list(self.correction_inputs)
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "HybridConfig":
+        """Rebuild from :meth:`to_dict`; a config stored before :attr:`correction_inputs` sees every state."""
+        config = super().from_dict(d)
+        if isinstance(d, Mapping) and "correction_inputs" not in d and isinstance(config, HybridConfig):
+            config = config.replace(correction_inputs=tuple(v.name for v in config.system().states))
+        return config

@@ -47,7 +47,7 @@ from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.hybrid.compiled_torch import casadi_to_torch
 from nnfmu.hybrid.config import HybridConfig
 from nnfmu.hybrid.fused import fused_step, weight_vector
-from nnfmu.hybrid.parameters import document_system, physics_system
+from nnfmu.hybrid.parameters import document_system, hide_state_inputs, physics_system
 from nnfmu.models.base import StepModel
 from nnfmu.models.mlp import activation_module
 from nnfmu.physics import PhysicsSystem, rk4_step
@@ -144,6 +144,7 @@ class HybridStepModel(StepModel):
         self._scatter[self._corrected, torch.arange(len(self._corrected))] = scale
         self.physics_log_scale = nn.Parameter(torch.zeros(len(config.train_physics)))
         self.correction = _correction_mlp(config, system.n_x, len(config.corrected_states))
+        hide_state_inputs(self.correction[0], [i for i, n in enumerate(states) if n not in config.correction_inputs])
         self._check_sizes()
 
     def _check_units(self, system: PhysicsSystem) -> None:

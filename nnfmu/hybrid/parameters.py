@@ -5,7 +5,9 @@
 - :func:`normalise_physics_params` and :func:`load_physics_params`: a JSON object of parameter names and
   numbers (a tuple field may be a list), checked against the physics' ``p`` vector;
 - :func:`kinematic_states`: the states whose derivative is exactly another state (``dpos/dt = v``), which a
-  hybrid's correction leaves alone by default.
+  hybrid's correction leaves alone by default;
+- :func:`ignorable_states`: the states no derivative depends on (a position on a rail), which a hybrid's
+  correction does not see by default, and :func:`hide_state_inputs`, which keeps them out of its network.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import os
 from typing import Mapping
 
 import casadi as ca
+import torch
 
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, UnknownOptionError
 from nnfmu.physics import PhysicsSystem
@@ -24,7 +27,8 @@ from nnfmu.physics.document import system_from_document
 from nnfmu.physics.registry import physics_entry, physics_names
 
 __all__ = ["physics_system", "document_system", "document_text", "registered_defaults",
-           "normalise_physics_params", "load_physics_params", "kinematic_states"]
+           "normalise_physics_params", "load_physics_params", "kinematic_states", "ignorable_states",
+           "hide_state_inputs"]
 
 
 @functools.lru_cache(maxsize=None)
@@ -76,6 +80,36 @@ def kinematic_states(system: PhysicsSystem) -> tuple[str, ...]:
     xdot = ode(x, ca.SX.sym("u", ode.size1_in(1)), ca.SX.sym("p", ode.size1_in(2)))
     return tuple(v.name for i, v in enumerate(system.states)
                  if any(j != i and ca.is_equal(xdot[i], x[j]) for j in range(system.n_x)))
+
+
+def ignorable_states(system: PhysicsSystem) -> tuple[str, ...]:
+    """Names of the states that no derivative of ``system.ode`` depends on (structurally), such as ``pos`` on a rail.
+
+    The model says its dynamics do not change when such a state is shifted (a cyclic coordinate); it
+    is an integral, which on an integrating plant wanders beyond any range the training records cover.
+    On the viscous slider fitted to Stribeck data, a correction that saw ``pos`` too reached a best
+    validation NRMSE of 0.20 in 120 optimiser steps, against 0.149 with ``v`` and the force alone.
+    """
+    ode = system.ode.expand() if system.ode.is_a("MXFunction") else system.ode
+    x = ca.SX.sym("x", system.n_x)
+    xdot = ode(x, ca.SX.sym("u", ode.size1_in(1)), ca.SX.sym("p", ode.size1_in(2)))
+    return tuple(v.name for i, v in enumerate(system.states) if not ca.depends_on(xdot, x[i]))
+
+
+def hide_state_inputs(first, columns) -> None:
+    """Keep the ``columns`` (state indices) of the correction's first Linear ``first`` at zero: set and gradient.
+
+    The network then cannot see those states in any path that reads its weights (torch, the fused C
+    step, the FMU). Zero gradients leave a zero weight where Adam(W) puts it: no update, no decay.
+    """
+    columns = list(columns)
+    if not columns:
+        return
+    mask = torch.ones_like(first.weight)
+    mask[:, columns] = 0.0
+    with torch.no_grad():
+        first.weight[:, columns] = 0.0
+    first.weight.register_hook(lambda grad: grad * mask.to(grad.device, grad.dtype))
 
 
 def _number(name: str, value) -> float:
