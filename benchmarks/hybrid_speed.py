@@ -104,11 +104,18 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=50, help="samples per window")
     p.add_argument("--hidden", type=int, default=32)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--paths", nargs="+", metavar="PATH",
+                   help="only these rows, by name (e.g. 'sx, eager' 'sx, fused + graphed'); the first is the base")
     args = p.parse_args()
     torch.set_num_threads(1)
     where = torch.cuda.get_device_name() if args.device.startswith("cuda") else platform.processor() or "cpu"
     print(f"hybrid valve, batch {args.batch} x {args.steps} steps, float64, torch {torch.__version__}, {where}")
     table = paths(args.device, args.batch, args.steps, args.hidden)
+    if args.paths:
+        unknown = sorted(set(args.paths) - set(table))
+        if unknown:
+            p.error(f"unknown paths {unknown}; the {args.device} paths are {list(table)}")
+        table = {name: table[name] for name in args.paths}
     setup, times, grads = {}, {name: [] for name in table}, {}
     for name, path in table.items():
         setup[name], grads[name] = iteration(*path)
