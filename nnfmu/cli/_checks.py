@@ -79,6 +79,7 @@ RULES: dict[str | tuple[str, str], Rule] = {
     "order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "max_order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "max_evaluations": Rule(1, 10_000_000),
+    "order_candidates": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     # fit
     "starts": Rule(1, 1000, fix="each start is a whole fit; a few spread inside the bounds are usual"),
     # import

@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                  "chooses the order and guards the refinement)")
     p.add_argument("--order", type=int, metavar="N", help="number of states (default: chosen on validation)")
     p.add_argument("--max-order", type=int, default=20, metavar="N", help="largest order tried (default 20)")
+    p.add_argument("--order-candidates", type=int, default=4, metavar="N",
+                   help="orders compared after a short refinement when choosing (default 4: the best subspace "
+                        "model's and those at the largest singular-value gaps; 1: the subspace models decide)")
     p.add_argument("--init", choices=["estimate", "zero-offset"], default="estimate",
                    help="initial state: 'estimate' (default) reproduces y0 closest to equilibrium for u0; "
                         "'zero-offset' starts at zero with inputs and outputs relative to u0 and y0 "
@@ -47,6 +50,9 @@ def _summary(model, dataset) -> list[str]:
 
     info = model.info
     how = "forced" if info["config"]["order"] else f"chosen on the {info['scored_on']} split"
+    candidates = info.get("order_candidates")
+    if candidates:  # the orders compared after a short refinement (nnfmu.linear.order)
+        how += ", among " + ", ".join(f"{n}: {v:.4f}" for n, v in candidates.items()) + " shortly refined"
     sv = ", ".join(f"{v:.3g}" for v in info["singular_values"][:model.n_x + 3])
     lines = [f"order {model.n_x} ({how}); horizon {info['horizon']}; singular values {sv}, ...",
              f"free-run NRMSE on {info['scored_on']}: subspace {info['nrmse_subspace']:.4f}"]
@@ -63,6 +69,18 @@ def _summary(model, dataset) -> list[str]:
     return lines
 
 
+def _plan(args: argparse.Namespace, config, dataset) -> str:
+    """The line printed before the identification: what it will try (it may take minutes)."""
+    line = f"linear: identifying on {args.data}: " + (f"order {args.order}" if args.order else
+                                                      f"orders up to {args.max_order}")
+    if args.no_refine:
+        return line
+    if not args.order and config.order_candidates > 1 and dataset.valid is not None:
+        line += f" (up to {config.order_candidates} compared after {max(1, config.evaluations // 10)} " \
+                "refinement evaluations each)"
+    return line + f", then up to {config.evaluations} refinement evaluations (may take minutes)"
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
@@ -76,18 +94,16 @@ def _run(args: argparse.Namespace) -> int:
     if not is_c_identifier(args.name):
         raise ConfigError(f"--name must be a C identifier (letters, digits, '_'), got {args.name!r}")
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
-                          refine=not args.no_refine, refine_x0=args.refine_x0,
-                          refine_method=args.refine_method, max_evaluations=args.max_evaluations,
-                          threads=args.threads)
+                          order_candidates=args.order_candidates, refine=not args.no_refine,
+                          refine_x0=args.refine_x0, refine_method=args.refine_method,
+                          max_evaluations=args.max_evaluations, threads=args.threads)
     if args.out:
         from nnfmu.cli.export import check_fmu_options
 
         check_fmu_options(args)
     dataset = load_dataset(args.data)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
-    print(f"linear: identifying on {args.data}: " + (f"order {args.order}" if args.order else
-          f"orders up to {args.max_order}") + ("" if args.no_refine else f", then up to {config.evaluations} "
-          "refinement evaluations (may take minutes)"), flush=True)  # --quiet is not silent until the result
+    print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))
     with all_or_nothing(args.out, args.save):  # a failing --save removes the FMU just written, and the reverse

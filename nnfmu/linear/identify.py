@@ -9,9 +9,17 @@ Steps of :func:`identify_linear`:
 2. Subspace fit (N4SID, :mod:`nnfmu.linear.subspace`) on the training split,
    with horizon ``s = max(2, ceil((n_max + 1) / n_y))`` unless given.
 3. Order. ``order=N`` forces it. Otherwise every order from 1 to ``max_order``
-   that the singular values support is realised, and the order chosen is the
-   smallest whose free-run NRMSE on the validation split (the training split if
-   there is none) is within ``order_tolerance`` (relative, at least 1e-6) of the best.
+   that the singular values support is realised and scored by its free-run NRMSE on
+   the validation split (the training split if there is none). Up to
+   ``order_candidates`` orders (the best of those, and the orders at the largest
+   singular-value gaps) are then refined for a tenth of the refinement's evaluations
+   and scored again, and the order chosen is the smallest candidate within
+   ``order_tolerance`` (relative, at least 1e-6) of the best refined one
+   (:mod:`nnfmu.linear.order`: the subspace models alone can rank orders wrongly,
+   on the robot every one ran worse than the mean). The subspace scores decide
+   with ``order_candidates=1``, ``refine=False``, or without a validation split:
+   on the training data the refined candidates were fitted to, more states
+   always look better.
 4. Stability. Eigenvalues of ``A`` beyond ``0.999 * max_spectral_radius`` are
    pulled onto that circle and ``B, b`` refitted.
 5. Refinement (optional, :mod:`nnfmu.linear.refine`): output-error least squares on
@@ -41,8 +49,9 @@ from threadpoolctl import threadpool_limits
 from nnfmu.progress import tqdm  # a line every few seconds in a log file, not one per evaluation
 
 from nnfmu.data import Dataset, Trajectories
-from nnfmu.errors import ConfigError, DataError, ShapeError, check_options
+from nnfmu.errors import ConfigError, ShapeError, check_options
 from nnfmu.linear.model import LinearModel
+from nnfmu.linear.order import OrderChoice, choose_order
 from nnfmu.linear.refine import METHODS, X0_OPTIONS, EarlyStop, refine
 from nnfmu.linear.statespace import (
     INIT_OPTIONS,
@@ -89,6 +98,8 @@ class LinearConfig:
         No refined ``A`` reaches this spectral radius (in (0, 1]).
     order_tolerance : float
         Relative NRMSE tolerance of the order choice.
+    order_candidates : int
+        Most orders refined shortly to choose the order (step 3); 1: the subspace scores decide.
     threads : int
         BLAS threads of the identification (default 1: faster on this project's small
         matrices, and a result that does not depend on the machine's core count).
@@ -105,13 +116,15 @@ class LinearConfig:
     refine_patience: int | None = 10
     max_spectral_radius: float = 0.9999
     order_tolerance: float = 0.02
+    order_candidates: int = 4
     threads: int = 1
 
     def __post_init__(self) -> None:
         for name, allowed in (("init", INIT_OPTIONS), ("refine_x0", X0_OPTIONS), ("refine_method", METHODS)):
             if getattr(self, name) not in allowed:
                 raise ConfigError(f"{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
-        for name in ("order", "max_order", "horizon", "max_evaluations", "refine_patience", "threads"):
+        for name in ("order", "max_order", "horizon", "max_evaluations", "refine_patience", "order_candidates",
+                     "threads"):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, (int, np.integer)) or value < 1):
                 raise ConfigError(f"{name} must be a positive integer, got {value!r}")
@@ -200,30 +213,11 @@ def _subspace_model(fit, order: int, us, ys, radius: float) -> tuple[StateSpace,
     return StateSpace(stable_A, B, b, C, d), stable_A is not A
 
 
-def _choose_order(fit, config: LinearConfig, train, check, progress: bool) -> tuple[int, dict]:
-    """The order (step 3) and the validation NRMSE of every order tried."""
-    radius = 0.999 * config.max_spectral_radius
-    scores = {}
-    top = fit.singular_values[0]
-    orders = tqdm(range(1, min(config.max_order, fit.max_order) + 1), disable=not progress, unit="order",
-                  desc="linear: choose the order", dynamic_ncols=True)
-    for n in orders:
-        if fit.singular_values[n - 1] <= 1e-10 * top:
-            break  # the data show no more states
-        sys, _ = _subspace_model(fit, n, *train, radius)
-        scores[n] = free_run_nrmse(sys, config.init, *check)
-        orders.set_postfix(order=n, nrmse=f"{scores[n]:.4f}", best=min(scores, key=scores.get))
-    orders.close()
-    if not scores:  # every singular value is zero: constant data
-        raise DataError("the training data show no dynamics (the inputs and outputs are constant, so every "
-                        "singular value is 0); a linear model needs data that vary: check the dataset's signals")
-    best = min(scores.values())
-    limit = best + max(config.order_tolerance * best, 1e-6)
-    return min(n for n, v in scores.items() if v <= limit), scores
-
-
 def _refine(sys: StateSpace, config: LinearConfig, train, check, before: float,
-            progress: bool) -> tuple[StateSpace, dict]:
+            progress: bool, evaluations: int | None = None) -> tuple[StateSpace, dict]:
+    """Refine ``sys`` with ``evaluations`` (default ``config.evaluations``); the system kept and a report."""
+    if evaluations is not None:
+        config = dataclasses.replace(config, max_evaluations=evaluations)
     bar = tqdm(total=config.evaluations, disable=not progress, unit="evaluation", dynamic_ncols=True,
                desc=f"linear: refine order {sys.n_x} (output error)")
 
@@ -266,8 +260,9 @@ def identify_linear(dataset: Dataset, config: LinearConfig | None = None, *, pro
     config : LinearConfig, optional
         All options; or give them as keywords (``order=12, init="zero-offset"``), not both.
     progress : bool
-        Progress bars: the orders tried (with their validation NRMSE), then the refinement's
-        residual evaluations (with the cost, half the sum of squared normalised errors).
+        Progress bars: the orders tried (with their validation NRMSE), the candidates refined
+        shortly (step 3), then the refinement's residual evaluations (with the cost, half the sum
+        of squared normalised errors).
 
     Returns
     -------
@@ -290,21 +285,48 @@ def _identify(dataset: Dataset, config: LinearConfig, progress: bool) -> LinearM
     check_split = "valid" if dataset.valid is not None else "train"
     check = scaling.apply(dataset.split(check_split))
     fit = fit_subspace(*train, s, constant=config.init == "estimate")
+    radius = 0.999 * config.max_spectral_radius
     if config.order is not None:
-        order, scores = config.order, {}
+        choice = OrderChoice(config.order, {})
     else:
-        order, scores = _choose_order(fit, config, train, check, progress)
-    sys, stabilised = _subspace_model(fit, order, *train, 0.999 * config.max_spectral_radius)
+        def score(system: StateSpace) -> float:
+            return free_run_nrmse(system, config.init, *check)
+
+        def short(system: StateSpace) -> tuple[StateSpace, int]:  # step 3's short refinement of a candidate
+            refined, report = _refine(system, config, train, check, score(system), False,
+                                      max(1, config.evaluations // 10))
+            return refined, report["evaluations"]
+
+        choice = choose_order(fit.singular_values, min(config.max_order, fit.max_order),
+                              model=lambda n: _subspace_model(fit, n, *train, radius)[0], score=score,
+                              tolerance=config.order_tolerance, count=config.order_candidates,
+                              refine=short if config.refine and check_split == "valid" else None,
+                              progress=progress)
+    order = choice.order
+    sys, stabilised = _subspace_model(fit, order, *train, radius)
     before = free_run_nrmse(sys, config.init, *check)
     info = {"method": "N4SID (state sequence), then output-error least squares" if config.refine else "N4SID",
             "order": order, "horizon": s, "singular_values": fit.singular_values.tolist(),
-            "order_scores": {str(n): v for n, v in scores.items()}, "stabilised": stabilised,
+            "order_scores": {str(n): v for n, v in choice.subspace.items()},
+            "order_candidates": {str(n): v for n, v in choice.refined.items()}, "stabilised": stabilised,
             "scored_on": check_split, "nrmse_subspace": before, "config": dataclasses.asdict(config),
             "dataset": dict(dataset.source),
             "training_mean": {"u": np.asarray(st.u_mean, dtype=float).tolist(),  # the FMU's start values
                               "y": np.asarray(st.y_mean, dtype=float).tolist()}}
-    if config.refine:
+    if config.refine and choice.start is None:
         sys, info["refinement"] = _refine(sys, config, train, check, before, progress)
+    elif config.refine:  # the chosen candidate's refinement goes on from its short one (step 3)
+        left = max(1, config.evaluations - choice.evaluations)
+        sys, report = _refine(choice.start, config, train, check, free_run_nrmse(choice.start, config.init, *check),
+                              progress, left)
+        after = free_run_nrmse(sys, config.init, *check)
+        report.update(evaluations=report["evaluations"] + choice.evaluations, short_evaluations=choice.evaluations,
+                      accepted=bool(after < before))
+        if after < before:  # kept: its score; discarded: how far refining got, as _refine reports it
+            report["nrmse_after"] = after
+        else:
+            sys = _subspace_model(fit, order, *train, radius)[0]
+        info["refinement"] = report
     info["nrmse_valid"] = free_run_nrmse(sys, config.init, *check)
     info["spectral_radius"] = sys.spectral_radius
     return LinearModel(scaling.physical(sys), config.init, st.y_std, dataset.Ts,
