@@ -6,6 +6,9 @@ correction has to supply the missing friction::
 
     m dv/dt = F - d v        dpos/dt = v        y = pos
 
+A hybrid on it corrects ``dv/dt`` only (``dpos/dt = v`` is a kinematic identity) and its network sees ``v``
+and ``F``, not ``pos`` (no derivative depends on it): the defaults of ``HybridConfig`` for such states.
+
     nnfmu info examples/slider_viscous.py
 """
 
