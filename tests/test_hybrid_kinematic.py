@@ -74,3 +74,4 @@ def test_a_stored_config_from_before_the_option_sees_every_state():
     assert HybridConfig.from_dict(old).correction_inputs == ("pos", "v")  # as its network was trained
     assert HybridConfig.from_dict(user.to_dict()) == user
     assert HybridConfig(n_u=1, n_y=1, physics="slider").correction_inputs == ("pos", "v")  # registered: as before
+    assert user.replace(physics="slider", corrected_states=None).correction_inputs == ("pos", "v")  # its own default

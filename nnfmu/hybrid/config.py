@@ -257,9 +257,11 @@ class HybridConfig(ModelConfig):
         return [given.get(v.name, v.start) for v in self.system().parameters]
 
     def replace(self, **changes) -> "HybridConfig":
-        """A copy with ``changes``; a new :attr:`physics` replaces the stored document too (unless one is given)."""
+        """A copy with ``changes``; a new :attr:`physics` replaces the stored document and the network's state inputs
+        too (unless given)."""
         if "physics" in changes:
             changes.setdefault("physics_document", None)
+            changes.setdefault("correction_inputs", None)
         return super().replace(**changes)
 
     def to_dict(self) -> dict:
