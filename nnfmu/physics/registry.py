@@ -32,7 +32,8 @@ class PhysicsEntry:
     build : callable
         ``build() -> PhysicsSystem`` at the nominal parameters.
     corrected_states : tuple of str, optional
-        States whose derivative a hybrid corrects by default (None: every state).
+        States whose derivative a hybrid corrects by default (None: every state but the kinematic identities,
+        :func:`nnfmu.hybrid.parameters.kinematic_states`).
     correction_time : float, optional
         Seconds; a hybrid's default scale of its derivative correction (None: ten sample times,
         :data:`nnfmu.hybrid.config.DEFAULT_CORRECTION_SAMPLES`).
