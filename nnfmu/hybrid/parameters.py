@@ -102,14 +102,19 @@ def hide_state_inputs(first, columns) -> None:
     The network then cannot see those states in any path that reads its weights (torch, the fused C
     step, the FMU). Zero gradients leave a zero weight where Adam(W) puts it: no update, no decay.
     """
-    columns = list(columns)
+    columns = [int(c) for c in columns]
     if not columns:
         return
-    mask = torch.ones_like(first.weight)
-    mask[:, columns] = 0.0
     with torch.no_grad():
         first.weight[:, columns] = 0.0
-    first.weight.register_hook(lambda grad: grad * mask.to(grad.device, grad.dtype))
+
+    def zero_columns(grad: torch.Tensor) -> torch.Tensor:
+        grad = grad.clone()
+        for c in columns:  # plain slices: no index tensor to copy to the device (a CUDA graph records this)
+            grad[:, c] = 0.0
+        return grad
+
+    first.weight.register_hook(zero_columns)
 
 
 def _number(name: str, value) -> float:
