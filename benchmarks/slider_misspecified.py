@@ -9,11 +9,10 @@ The user model, examples/slider_viscous.py:slider_viscous, has only m and d (no 
 Models, each made by its CLI command (CPU seconds of the command are reported):
   grey-box   nnfmu fit slider_viscous (m and d estimated by free-run simulation error)
   hybrid     nnfmu train --arch hybrid --physics fit.json (derivative correction of v, seeing v and F; m and d
-             trained jointly), with the batch and patience that `nnfmu train` plans for the networks on these
-             data (nnfmu.training.plan: 2 of the 10 records a step, patience 4000 steps), which it does not
-             plan for a hybrid: at its defaults (batch 64, patience 15 epochs) it makes one step an epoch and
-             stopped after 17 steps, validation 0.240 against 0.124 with the plan's (4 minutes; the choice
-             made on validation)
+             trained jointly), with the batch and patience `nnfmu train` plans from the data (2 of the 10
+             records a step, patience 4000 steps) as for the networks; before nnfmu planned them for a hybrid,
+             its defaults (batch 64, patience 15 epochs) made one step an epoch and it stopped after 17 steps,
+             validation 0.240 against 0.124 with the plan's (4 minutes; the choice made on validation)
   gru, mlp   nnfmu train --arch gru|mlp at the defaults (their data plan), the same minutes as the hybrid
   linear     nnfmu linear (order chosen on validation, output-error refinement)
 Every trained model gets the same wall-clock budget (--minutes) and an epoch cap it does not reach.
@@ -52,7 +51,6 @@ from nnfmu.physics.rk4 import rk4_function
 from nnfmu.physics.slider import SLIDER_F_MAX, SLIDER_TS, slider_system
 from nnfmu.signals import SignalLimits, excitation
 from nnfmu.training import free_run
-from nnfmu.training.plan import plan_training
 
 ROOT = Path(__file__).resolve().parents[1]
 NNFMU = str(Path(sys.executable).with_name("nnfmu"))
@@ -162,12 +160,8 @@ def main() -> None:
     system, report = load_fit(work / "fit.json")
     fitted = ", ".join(f"{p} = {r['value']:.3g} +- {r['std_error']:.2g}" for p, r in report["parameters"].items())
     rows["grey-box (" + fitted + ")"] = (system.model(expose_parameters=False), cpu)
-    plan = plan_training(data, {"epochs": args.epochs, "max_minutes": args.minutes})  # what the networks get
-    print("the networks' plan, given to the hybrid: " + "; ".join(plan.lines), flush=True)
-    planned = ["--batch-size", str(plan.changes["batch_size"]), "--patience", str(plan.changes["patience"])]
     cpu = run(["train", "--arch", "hybrid", "--physics", str(work / "fit.json"), "--data", D,
-               "-o", str(work / "hybrid.pt"), "--max-minutes", str(args.minutes), *budget, *planned,
-               *args.hybrid_args.split()])
+               "-o", str(work / "hybrid.pt"), "--max-minutes", str(args.minutes), *budget, *args.hybrid_args.split()])
     rows["hybrid on the grey-box fit"] = (load_model(work / "hybrid.pt"), cpu)
     for arch in ("gru", "mlp"):
         cpu = run(["train", "--arch", arch, "--data", D, "-o", str(work / f"{arch}.pt"),

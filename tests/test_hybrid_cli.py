@@ -119,3 +119,23 @@ def test_the_command_line_choices_are_the_packages(capsys):
         main(["train", "--help"])
     physics_help = " ".join(capsys.readouterr().out.split()).partition("--physics NAME|FILE.py:NAME")[2]
     assert f"({', '.join(physics_names())}) or FILE.py:NAME" in physics_help
+
+
+def test_the_hybrid_gets_a_budget_planned_from_the_data_on_whole_trajectories(folders, capsys):
+    """At its defaults a hybrid on few records made one optimiser step an epoch and stopped after ~16 (issue 23)."""
+    data, _, root = folders
+    out = root / "planned.pt"
+    argv = ["train", "--data", str(data), "--arch", "hybrid", "--physics", "valve", "--hidden", "4", "--epochs", "1",
+            "--quiet", "--out", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "plan: windows: whole trajectories (a hybrid's state starts from y0" in printed
+    assert "plan: batch: 1 of 6 trajectories an epoch" in printed
+    cfg = load_checkpoint(out)["train_config"]
+    assert (cfg["batch_size"], cfg["truncate"], cfg["epochs"], cfg["patience"]) == (1, None, 1, 4000 // 6 + 1)
+
+
+def test_max_minutes_alone_trains_one_hybrid_instead_of_a_search():
+    """The budget plan does not make ``--max-minutes`` a search over the networks' knobs for a hybrid."""
+    from nnfmu.cli._train_search import _planned
+    assert not _planned("hybrid") and _planned("gru") and _planned(None)

@@ -1,10 +1,11 @@
 """``nnfmu train`` at its defaults: the linear path and the training choices made from the data.
 
-For an architecture whose record asks for it (``Architecture.data_plan``: the networks, not the hybrid):
-without ``--linear-path off`` (and without ``--increment``) every network starts on a linear path
+For an architecture whose record asks for it (``Architecture.data_plan``): without ``--linear-path off``
+(and without ``--increment``) every network that may sit on a linear path starts on one
 (:mod:`nnfmu.models.linear_path`): the linear baseline is identified on the training split first, and
 the network learns a correction to it, starting from zero. The windows, batch, budget and validation
 tail the user left out are chosen from the data (:mod:`nnfmu.training.plan`); the choices are printed.
+A record with ``data_plan="budget"`` (the hybrid) trains on whole trajectories unless ``--truncate`` is given.
 """
 
 from __future__ import annotations
@@ -18,8 +19,13 @@ def prepare(args, ds, model_config, train_config, given: dict):
     from nnfmu.training.plan import plan_training, valid_fraction, validation_line
     from nnfmu.training.trainer import prepare_dataset
 
-    if not architectures.architecture(model_config.arch).data_plan:
+    data_plan = architectures.architecture(model_config.arch).data_plan
+    if not data_plan:
         return ds, model_config, train_config, None
+    if data_plan == "budget" and "truncate" not in given:
+        given = {**given, "truncate": None}
+        print(f"plan: windows: whole trajectories (a {model_config.arch}'s state starts from y0 at a record's start; "
+              "--truncate N cuts windows)")
     init_window = model_config.init_window
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
         train_config = train_config.replace(valid_fraction=frac)

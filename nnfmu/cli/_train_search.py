@@ -1,8 +1,8 @@
 """``nnfmu train --max-minutes N`` (without ``--epochs``, ``--patience``, ``--seeds``, ``--resume``, ``--increment``):
 the budget spent on a small early-stopping search (:mod:`nnfmu.study.time_search`), reported in one table.
 
-The search applies to architectures whose record plans from the data (``Architecture.data_plan``: the networks,
-not the hybrid); ``--arch`` is then optional, and when left out the architectures with a ``search_rank`` are searched.
+The search applies to architectures whose record plans everything from the data (``Architecture.data_plan`` True:
+the networks, not the hybrid); ``--arch`` is then optional, and when left out the architectures with a ``search_rank`` are searched.
 Every model or training option given stays fixed in every trial.
 """
 
@@ -28,7 +28,7 @@ def applies(args: argparse.Namespace) -> bool:
 def _planned(arch: str | None) -> bool:
     from nnfmu.models import architectures
 
-    return arch is None or architectures.architecture(arch).data_plan
+    return arch is None or architectures.architecture(arch).data_plan is True
 
 
 _noted: list = []

@@ -122,7 +122,7 @@ register_architecture(Architecture(
                help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
                     "needed)"),
     ),
-    data_plan=False,
+    data_plan="budget",
     linear_path=False,
     strategies=("parallel",),
     dtype="float64",

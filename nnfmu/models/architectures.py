@@ -134,9 +134,13 @@ class Architecture:
         tables (:mod:`nnfmu.study.presets`) have none for it (the defaults of its config otherwise).
     search_rank : int, optional
         Place in the architectures that ``nnfmu train --max-minutes`` searches (lowest first); None: not searched.
-    data_plan, linear_path : bool
-        Whether ``nnfmu train`` chooses windows, batch, budget, validation tail and a linear path from the data
-        for it, and whether it may sit on a linear path (``linear_order > 0``).
+    data_plan : bool or "budget"
+        What ``nnfmu train`` chooses from the data for it where the user left it out (:mod:`nnfmu.training.plan`):
+        True: windows, batch, budget and validation tail, and ``--max-minutes`` alone searches; ``"budget"``: the
+        same on whole trajectories and without the search (a model whose initial state from ``y0`` holds at a
+        record's start only, such as the hybrid's physics state); False: nothing (the TrainConfig defaults).
+    linear_path : bool
+        Whether it may sit on a linear path (``linear_order > 0``), identified by ``nnfmu train`` from the data.
     strategies : tuple of str
         The training strategies it takes (the first is the default).
     dtype : str
@@ -161,7 +165,7 @@ class Architecture:
     grid: Mapping[str, tuple] = field(default_factory=dict)
     preset: Mapping[str, Any] = field(default_factory=dict)
     search_rank: int | None = None
-    data_plan: bool = True
+    data_plan: bool | str = True
     linear_path: bool = True
     strategies: tuple[str, ...] = ("parallel", "series-parallel")
     dtype: str = "float32"
@@ -172,6 +176,9 @@ class Architecture:
         if not is_c_identifier(self.name):
             raise ConfigError(f"an architecture's name must be a C identifier (ASCII letters, digits, _), "
                               f"got {self.name!r}")
+        if self.data_plan not in (True, False, "budget"):
+            raise ConfigError(f"architecture {self.name!r}: data_plan must be True, False or 'budget', "
+                              f"got {self.data_plan!r}")
         if (self.casadi_step is None) != (self.casadi_init is None):
             raise ConfigError(f"architecture {self.name!r}: give casadi_step and casadi_init together")
         if (self.to_casadi is None) != (self.casadi_model is None):
