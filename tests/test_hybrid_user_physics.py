@@ -17,16 +17,16 @@ import numpy as np
 import pytest
 import torch
 from fmpy.validation import validate_fmu
+from slider_cases import slider_dataset
 from test_fmu_model_exchange import MeInstance
 
 from nnfmu.cli import main
 from nnfmu.cosim import FmuSimulator
-from nnfmu.data import Channel, Dataset, Trajectories, save_dataset
 from nnfmu.errors import ShapeError, TrainingError
 from nnfmu.export import build_fmu, casadi_model
 from nnfmu.hybrid import HybridConfig, HybridStepModel, physics_system
 from nnfmu.models import build_model, load_checkpoint, load_model
-from nnfmu.physics import PhysicsSystem, resolve_physics, slider_system
+from nnfmu.physics import PhysicsSystem, resolve_physics
 from nnfmu.physics.document import system_to_document
 from nnfmu.training import TrainConfig, train
 from nnfmu.training.evaluate import score
@@ -87,19 +87,7 @@ def model_file(tmp_path_factory):
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     """The built-in slider (Stribeck friction) under piecewise-constant forces: 6 x 120 train, 2 valid, 1 test."""
-    truth, rng = slider_system(), np.random.default_rng(0)
-
-    def split(n_traj: int, n: int = 120) -> Trajectories:
-        us, ys = [], []
-        for _ in range(n_traj):
-            u = np.repeat(rng.uniform(-6.0, 6.0, size=(n // 10 + 1, 1)), 10, axis=0)[:n]
-            us.append(u)
-            ys.append(truth.simulate_states(np.array([rng.uniform(-0.1, 0.1), 0.0]), u[:-1])[:, :1])
-        return Trajectories(tuple(us), tuple(ys))
-
-    ds = Dataset(Ts=0.01, inputs=(Channel("F", "N"),), outputs=(Channel("pos", "m"),),
-                 splits={"train": split(6), "valid": split(2), "test": split(1)})
-    return ds, save_dataset(ds, tmp_path_factory.mktemp("slider_data") / "slider")
+    return slider_dataset(0, tmp_path_factory.mktemp("slider_data"))
 
 
 def physics_run(system: PhysicsSystem, u: np.ndarray, y0: np.ndarray) -> np.ndarray:

@@ -16,17 +16,17 @@ import io
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
+from slider_cases import slider_dataset
 from test_fmu_model_exchange import MeInstance
 
 from nnfmu.cli import main
 from nnfmu.cosim import FmuSimulator
-from nnfmu.data import Channel, Dataset, Trajectories, save_dataset
 from nnfmu.errors import ShapeError
 from nnfmu.hybrid import HybridStepModel
 from nnfmu.models import build_model, load_checkpoint, load_model
 from nnfmu.export import casadi_model
 from nnfmu.node import NodeConfig, node_physics
-from nnfmu.physics import slider_system
+
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -34,19 +34,7 @@ pytestmark = pytest.mark.usefixtures("one_thread")
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     """The slider (Stribeck friction) under piecewise-constant forces: 6 x 120 train, 2 valid, 1 test (Ts 10 ms)."""
-    truth, rng = slider_system(), np.random.default_rng(1)
-
-    def split(n_traj: int, n: int = 120) -> Trajectories:
-        us, ys = [], []
-        for _ in range(n_traj):
-            u = np.repeat(rng.uniform(-6.0, 6.0, size=(n // 10 + 1, 1)), 10, axis=0)[:n]
-            us.append(u)
-            ys.append(truth.simulate_states(np.array([rng.uniform(-0.1, 0.1), 0.0]), u[:-1])[:, :1])
-        return Trajectories(tuple(us), tuple(ys))
-
-    ds = Dataset(Ts=0.01, inputs=(Channel("F", "N"),), outputs=(Channel("pos", "m"),),
-                 splits={"train": split(6), "valid": split(2), "test": split(1)})
-    return ds, save_dataset(ds, tmp_path_factory.mktemp("slider_data") / "slider")
+    return slider_dataset(1, tmp_path_factory.mktemp("slider_data"))
 
 
 def _relative(got: np.ndarray, want: np.ndarray) -> float:
