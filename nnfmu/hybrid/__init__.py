@@ -94,6 +94,14 @@ def _check_device(config, device) -> None:
 
 # The choices below are those of nnfmu.hybrid.config (CORRECTIONS) and nnfmu.hybrid.compiled_torch (BACKENDS),
 # written out so that the command line needs neither torch nor CasADi (tests/test_hybrid_cli.py compares them).
+#: How a model with physics inside steps and runs it (the hybrid's and the neural ODE's options).
+PHYSICS_OPTIONS = (
+    Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
+           help="RK4 sub-steps per sample (default: the physics' own)"),
+    Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
+           help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler needed)"),
+)
+
 register_architecture(Architecture(
     name="hybrid",
     config_class="nnfmu.hybrid.config:HybridConfig",
@@ -116,11 +124,7 @@ register_architecture(Architecture(
         Option(flag="--correction", field="correction", choices=("derivative", "step"),
                help="where the network corrects the physics: derivative (inside every RK4 stage, default) or "
                     "step (after it)"),
-        Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
-               help="RK4 sub-steps per sample (default: the physics' own)"),
-        Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
-               help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
-                    "needed)"),
+        *PHYSICS_OPTIONS,
     ),
     data_plan="budget",
     linear_path=False,

@@ -18,9 +18,8 @@ This module registers the record only (no torch, no CasADi); the code is importe
 
 from typing import TYPE_CHECKING
 
-import nnfmu.hybrid  # noqa: F401  (registered first: the options both take appear under the hybrid's name)
+from nnfmu.hybrid import PHYSICS_OPTIONS  # registers the hybrid first: the shared options appear under it
 from nnfmu._lazy import lazy_exports
-from nnfmu.limits import MAX_RK4_SUBSTEPS
 from nnfmu.models.architectures import Architecture, Option, register_architecture
 
 NODE_ARCH = "node"
@@ -50,11 +49,7 @@ register_architecture(Architecture(
                open_bounds=(True, False),
                help="sample times in which the network's unit output moves a state by one output standard "
                     "deviation: xdot = N(x, u) / (SAMPLES * Ts) (default 10)"),
-        Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
-               help="RK4 sub-steps per sample (default: the physics' own)"),
-        Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
-               help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler "
-                    "needed)"),
+        *PHYSICS_OPTIONS,
     ),
     linear_path=False,
     strategies=("parallel",),
