@@ -178,9 +178,11 @@ def test_a_copy_of_the_model_starts_without_graphs(record_on_cpu):
     assert len(copy.deepcopy(model)._cuda_graphs.graphs) == 0
 
 
-def test_an_architecture_without_its_own_training_rollout_keeps_the_trainer_default(monkeypatch):
+def test_the_trainer_asks_the_architecture_record_for_its_training_rollout(record_on_cpu, monkeypatch):
+    """Where graphs would apply, a record without the hook (dataclasses.replace) trains by the plain path."""
     model, un, yn = _hybrid()
     record = architectures.architecture("hybrid")
     monkeypatch.setitem(architectures._RECORDS, "hybrid", dataclasses.replace(record, training_rollout=None))
     out = training_rollout(model)(un, yn)
     torch.testing.assert_close(out, model.rollout_normalised(un, yn[:, 0]), rtol=0, atol=0)
+    assert record_on_cpu == []  # nothing recorded: the graphs come from the record, not from the trainer
