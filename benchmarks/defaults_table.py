@@ -9,7 +9,8 @@ For each dataset folder and architecture this runs exactly what a new user types
 
 and prints one table: the test NRMSE (free run in fmpy) of the linear model and of each network, its
 ratio to the linear model, and the CPU seconds (user + system, of the command and its children) of each
-cell. ``--max-minutes N`` adds that flag to every training (the time-budget row of the issue). Pin it to
+cell (each training's output is kept in ``WORK/DATASET/ARCH.log``). ``--max-minutes N`` adds that flag to every training (the time-budget search over the knobs left out);
+the architecture ``search`` names the cell that gives no ``--arch``, so that the search also chooses it. Pin it to
 one core on a shared machine (``taskset -c 1``) and name the CPU next to the figures. Not part of the tests.
 
     python benchmarks/defaults_table.py data/slider data/valve --archs gru mlp --work /tmp/defaults
@@ -30,26 +31,36 @@ def _cpu() -> float:
     return kids.ru_utime + kids.ru_stime
 
 
-def _nnfmu(*args: str) -> float:
-    """Run one nnfmu command; its CPU seconds."""
+def _nnfmu(*args: str, log: Path | None = None) -> float:
+    """Run one nnfmu command (its output kept in ``log``, if given); its CPU seconds."""
     before = _cpu()
     done = subprocess.run([sys.executable, "-m", "nnfmu", *args], capture_output=True, text=True)
+    if log is not None:
+        log.write_text(done.stdout + done.stderr)
     if done.returncode != 0:
         raise SystemExit(f"nnfmu {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()[-2000:]}")
     return _cpu() - before
 
 
-def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str]) -> dict:
-    """Train, export and score every cell of one dataset; returns {name: (test NRMSE, CPU s)}."""
+def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reuse_linear: bool = False) -> dict:
+    """Train, export and score every cell of one dataset; returns {name: (test NRMSE, CPU s)}.
+
+    ``reuse_linear``: keep a ``linear.fmu`` already in ``work`` (its CPU seconds then read NaN).
+    """
     work.mkdir(parents=True, exist_ok=True)
     fmus, cpu = {}, {}
     fmus["linear"] = work / "linear.fmu"
-    fmus["linear"].unlink(missing_ok=True)
-    cpu["linear"] = _nnfmu("linear", "--data", str(data), "-o", str(fmus["linear"]), "--quiet")
+    if reuse_linear and fmus["linear"].is_file():
+        cpu["linear"] = float("nan")
+    else:
+        fmus["linear"].unlink(missing_ok=True)
+        cpu["linear"] = _nnfmu("linear", "--data", str(data), "-o", str(fmus["linear"]), "--quiet")
     for arch in archs:
         ckpt = work / f"{arch}.pt"
         ckpt.unlink(missing_ok=True)
-        cpu[arch] = _nnfmu("train", "--data", str(data), "--arch", arch, "-o", str(ckpt), "--quiet", *extra)
+        chosen = [] if arch == "search" else ["--arch", arch]
+        cpu[arch] = _nnfmu("train", "--data", str(data), *chosen, "-o", str(ckpt), "--quiet", *extra,
+                           log=work / f"{arch}.log")
         fmus[arch] = work / f"{arch}.fmu"
         fmus[arch].unlink(missing_ok=True)
         _nnfmu("export", str(ckpt), "-o", str(fmus[arch]))
@@ -66,11 +77,15 @@ def main(argv=None) -> int:
     p.add_argument("--archs", nargs="+", default=["mlp", "rnn", "lstm", "gru", "tcn"])
     p.add_argument("--work", type=Path, default=Path("defaults-table"))
     p.add_argument("--max-minutes", type=float, help="the time budget of every training (default: none)")
+    p.add_argument("--reuse-linear", action="store_true",
+                   help="keep the linear.fmu of an earlier run in the work folder instead of identifying it again")
     args = p.parse_args(argv)
+    if "search" in args.archs and args.max_minutes is None:
+        p.error("the 'search' cell needs --max-minutes (the search's time budget)")
     extra = [] if args.max_minutes is None else ["--max-minutes", str(args.max_minutes)]
     print("| dataset | model | test NRMSE (fmpy) | / linear | CPU s |\n|---|---|---|---|---|", flush=True)
     for data in args.datasets:
-        rows = run_dataset(data, args.archs, args.work / data.name, extra)
+        rows = run_dataset(data, args.archs, args.work / data.name, extra, args.reuse_linear)
         base = rows["linear"][0]
         for name, (score, seconds) in rows.items():
             print(f"| {data.name} | {name} | {score:.4f} | {score / base:.3f} | {seconds:.0f} |", flush=True)

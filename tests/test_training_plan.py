@@ -46,6 +46,28 @@ def test_the_init_window_is_counted_into_the_validation_tail():
     assert valid_fraction(ds, init_window=201) == pytest.approx(valid_fraction(ds) + 200 / 4000)
 
 
+def pieces(contiguous: bool):
+    """Ten 500-sample pieces cut from one recording of an integrator (the robot benchmark's layout, smaller)."""
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(6000, 1))
+    y = np.cumsum(u, axis=0) * 0.01
+    return from_arrays(Ts=0.1, u_train=u[:5000].reshape(10, 500, 1), y_train=y[:5000].reshape(10, 500, 1),
+                       u_test=[u[5000:]], y_test=[y[5000:]], source={"contiguous": contiguous})
+
+
+def test_consecutive_pieces_of_one_recording_are_joined_for_windows_longer_than_a_piece():
+    plan = plan_training(pieces(True), {}, linear=_Integrator())
+    # joined: 5000 samples, so windows of MAX_WINDOW across the seams, not 10 whole 500-sample pieces
+    assert plan.changes["join"] is True and plan.changes["truncate"] == MAX_WINDOW
+    assert any("joined end to end" in line for line in plan.lines)
+    apart = plan_training(pieces(False), {}, linear=_Integrator())
+    assert "join" not in apart.changes and "truncate" not in apart.changes  # pieces of unknown origin stay apart
+    told = plan_training(pieces(True), {"join": False}, linear=_Integrator())  # --no-join
+    assert "join" not in told.changes and "truncate" not in told.changes
+    whole = plan_training(pieces(True), {"truncate": None}, linear=_Integrator())  # a hybrid's whole trajectories
+    assert "join" not in whole.changes and whole.changes["batch_size"] == 2
+
+
 def test_what_the_user_gives_is_kept_as_given():
     plan = plan_training(one_record(), {"truncate": 100, "batch_size": 7, "epochs": 5, "patience": 2,
                                         "valid_fraction": 0.1})

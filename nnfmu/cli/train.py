@@ -74,7 +74,8 @@ _TRAIN_OPTIONS = (
 # Switches (store_true), model or training fields.
 _FLAG_OPTIONS = (
     ("--join", "join", "join the training trajectories end to end before cutting --truncate windows (data cut "
-                       "from one continuous recording)"),
+                       "from one continuous recording; default: joined when the dataset says its records are "
+                       "consecutive pieces, as the robot benchmark's)"),
 )
 _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
             "valid_horizon": ("auto", "split", "joined")}
@@ -95,7 +96,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
         p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
     for flag, dest, text in _FLAG_OPTIONS:
-        p.add_argument(flag, dest=dest, action="store_const", const=True, default=None, help=text)
+        p.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction, default=None,
+                       help=text)
     p.add_argument("--increment", nargs="?", const="on", choices=["on", "auto"], default=None,
                    help="increment mode for integrating plants: predict y[k+1]-y[k] scaled by the data's "
                         "increments, inputs relative to the newest output. 'auto' trains the network both ways "
@@ -150,7 +152,7 @@ def _train_config(args: argparse.Namespace, stored: dict | None, record):
 
     changes = _given(args, _TRAIN_OPTIONS)
     if args.join is not None:
-        changes["join"] = True
+        changes["join"] = args.join
     if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
         changes.update(epochs=UNBOUNDED_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
     if args.strategy is not None:
@@ -228,7 +230,7 @@ def _run(args: argparse.Namespace) -> int:
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
     linear = None
     if stored is None:
-        given = {**_given(args, _TRAIN_OPTIONS), **({"join": True} if args.join else {})}
+        given = {**_given(args, _TRAIN_OPTIONS), **({} if args.join is None else {"join": args.join})}
         ds, model_config, train_config, linear = prepare_defaults(args, ds, model_config, train_config, given)
         if search_applies(args):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
             return run_search(args, ds, model_config, train_config, out, device, linear, given)

@@ -6,6 +6,9 @@ ends the run after a few dozen steps (issue 21: the two-tank system stopped at b
 than the mean). :func:`plan_training` chooses instead, from the number and length of the records and
 the linear model's slowest time scale:
 
+- ``join``: records that the dataset says are consecutive pieces of one recording
+  (``source["contiguous"]``, as the robot benchmark's 605-sample pieces) are joined end to end, so that
+  the windows below may be as long as the free runs the model must survive, not cut at the pieces' seams;
 - ``truncate``: whole trajectories when the longest is at most two windows long, else windows of
   ``clamp(5 tau, MIN_WINDOW, MAX_WINDOW)`` samples (``tau`` the slowest time constant in samples, so
   that an error of the initial state estimated at a window's start decays to under 1 % within it;
@@ -86,7 +89,12 @@ def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1
         changes["valid_fraction"] = frac
         lines.append(validation_line(ds, frac))
     lengths = np.asarray(ds.train.lengths, dtype=float) * (1.0 - changes.get("valid_fraction", 0.0))
-    if given.get("join"):
+    whole = "truncate" in given and given["truncate"] is None  # whole trajectories asked for (a hybrid's plan)
+    if "join" not in given and not whole and len(lengths) > 1 and bool(ds.source.get("contiguous")):
+        changes["join"] = True
+        lines.append(f"records: the {len(lengths)} training records joined end to end (the dataset says they are "
+                     "consecutive pieces of one recording; --no-join keeps them apart)")
+    if given.get("join", changes.get("join")):
         lengths = np.array([lengths.sum()])
     truncate = given.get("truncate")
     if "truncate" not in given:
