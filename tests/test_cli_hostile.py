@@ -31,7 +31,7 @@ ACCEPTED = {
     ("train", "--feedback-noise"): {"0"}, ("train", "--patience"): {"0", HUGE[int]},
     ("tune", "--patience"): {"0", HUGE[int]}, ("tune", "--gpus-per-trial"): {"0"},
     ("evaluate", "--trajectory"): {"0"}, ("evaluate", "--horizon"): {HUGE[int]}, ("generate", "--noise"): {"0"},
-    ("fit", "--seed"): {"0"},
+    ("fit", "--seed"): {"0"}, ("linear", "--valid-fraction"): {"0"},
 }
 #: Work that a command starts once its arguments are accepted; each is replaced by WorkStarted.
 WORK = ["nnfmu.training.train", "nnfmu.training.train_seeds", "nnfmu.linear.identify_linear",

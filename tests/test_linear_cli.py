@@ -76,3 +76,35 @@ def test_missing_dataset_and_bad_order(tmp_path, data_dir, capsys):
     assert main(["linear", "--data", str(data_dir), "--order", "0", "--save", str(tmp_path / "m.json")]) == 2
     assert "--order must be a whole number >= 1" in capsys.readouterr().err
     assert not (tmp_path / "m.json").exists()
+
+
+def test_one_record_holds_out_the_tail_train_holds_out_so_networks_start_from_this_model(tmp_path, capsys):
+    """On one record without a valid split, `nnfmu linear` is the model `nnfmu train` puts its networks on."""
+    from nnfmu.cli._train_plan import prepare
+    from nnfmu.data import load_dataset
+    from nnfmu.models import ModelConfig
+    from nnfmu.training import TrainConfig
+    from nnfmu.training.plan import valid_fraction
+
+    ds = _system_data()
+    one = from_arrays(Ts=ds.Ts, u_train=[np.concatenate(ds.train.u)], y_train=[np.concatenate(ds.train.y)],
+                      u_test=list(ds.test.u), y_test=list(ds.test.y))
+    data = save_dataset(one, tmp_path / "one")
+    assert main(["linear", "--data", str(data), "--save", str(tmp_path / "held.json"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"the last {valid_fraction(one):.0%} of the record" in out and "free-run NRMSE on valid" in out
+    held = load_linear(tmp_path / "held.json")
+
+    class Args:  # what `nnfmu train --data D --arch gru` passes to its plan
+        linear_path, increment = "auto", None
+
+    loaded = load_dataset(data)
+    _, _, _, start = prepare(Args(), loaded, ModelConfig(arch="gru", n_u=2, n_y=2), TrainConfig(), {})
+    for name in ("A", "B", "C", "d"):
+        np.testing.assert_array_equal(getattr(held.system, name), getattr(start.system, name))
+
+    assert main(["linear", "--data", str(data), "--valid-fraction", "0", "--save", str(tmp_path / "all.json"),
+                 "--quiet"]) == 0
+    assert "free-run NRMSE on train" in capsys.readouterr().out  # the whole record, the order chosen on it
+    assert main(["linear", "--data", str(data), "--valid-fraction", "1.5", "-o", str(tmp_path / "x.fmu")]) == 2
+    assert "--valid-fraction" in capsys.readouterr().err and not (tmp_path / "x.fmu").exists()

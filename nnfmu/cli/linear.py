@@ -35,6 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-evaluations", type=int, default=None, metavar="N",
                    help="cost evaluations allowed to the refinement (default 1000 for quasi-newton, 100 for "
                         "gauss-newton)")
+    p.add_argument("--valid-fraction", dest="holdout", type=float, default=None, metavar="F",
+                   help="one training record without a valid split: hold out its last F for validation (default: "
+                        "the tail `nnfmu train` holds out, so that this is the model its networks start from; "
+                        "0: fit the whole record and choose the order on it)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
                    help="BLAS threads (default 1: faster here, and the result does not depend on the core count)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
@@ -81,6 +85,21 @@ def _plan(args: argparse.Namespace, config, dataset) -> str:
     return line + f", then up to {config.evaluations} refinement evaluations (may take minutes)"
 
 
+def _held_out(dataset, fraction: float | None):
+    """``dataset`` with the validation tail of its one training record carved as ``nnfmu train`` carves it.
+
+    Only a dataset with one training record and no valid split changes; ``fraction`` None: the plan's tail
+    (:func:`nnfmu.training.plan.valid_fraction`), 0: none."""
+    from nnfmu.training.plan import valid_fraction, validation_line
+
+    if dataset.valid is not None or dataset.train.n_traj != 1 or fraction == 0.0:
+        return dataset
+    fraction = valid_fraction(dataset) if fraction is None else fraction
+    print(f"linear: {validation_line(dataset, fraction)}; the order is chosen and the refinement stopped on it, "
+          "as in `nnfmu train` (--valid-fraction 0: the whole record)")
+    return dataset.with_validation(fraction)
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
@@ -101,7 +120,7 @@ def _run(args: argparse.Namespace) -> int:
         from nnfmu.cli.export import check_fmu_options
 
         check_fmu_options(args)
-    dataset = load_dataset(args.data)
+    dataset = _held_out(load_dataset(args.data), args.holdout)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
     print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet)
