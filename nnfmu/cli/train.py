@@ -71,7 +71,7 @@ _TRAIN_OPTIONS = (
      "validation free runs: split (each trajectory), joined (end to end), auto (joined for contiguous pieces "
      "when the test is longer; default: auto)"),
 )
-# Switches (store_true), model or training fields.
+# Switches (--X, and --no-X to override a planned default), model or training fields.
 _FLAG_OPTIONS = (
     ("--join", "join", "join the training trajectories end to end before cutting --truncate windows (data cut "
                        "from one continuous recording; default: joined when the dataset says its records are "
@@ -96,8 +96,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for flag, dest, typ, text in _MODEL_OPTIONS + _TRAIN_OPTIONS:
         p.add_argument(flag, dest=dest, type=typ, default=None, choices=_CHOICES.get(dest), help=text)
     for flag, dest, text in _FLAG_OPTIONS:
-        p.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction, default=None,
-                       help=text)
+        p.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction, default=None, help=text)
     p.add_argument("--increment", nargs="?", const="on", choices=["on", "auto"], default=None,
                    help="increment mode for integrating plants: predict y[k+1]-y[k] scaled by the data's "
                         "increments, inputs relative to the newest output. 'auto' trains the network both ways "
