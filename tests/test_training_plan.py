@@ -52,7 +52,8 @@ def pieces(contiguous: bool):
     u = rng.normal(size=(6000, 1))
     y = np.cumsum(u, axis=0) * 0.01
     return from_arrays(Ts=0.1, u_train=u[:5000].reshape(10, 500, 1), y_train=y[:5000].reshape(10, 500, 1),
-                       u_test=[u[5000:]], y_test=[y[5000:]], source={"contiguous": contiguous})
+                       u_valid=[u[5000:5500]], y_valid=[y[5000:5500]], u_test=[u[5500:]], y_test=[y[5500:]],
+                       source={"contiguous": contiguous})
 
 
 def test_consecutive_pieces_of_one_recording_are_joined_for_windows_longer_than_a_piece():
@@ -66,6 +67,8 @@ def test_consecutive_pieces_of_one_recording_are_joined_for_windows_longer_than_
     assert "join" not in told.changes and "truncate" not in told.changes
     whole = plan_training(pieces(True), {"truncate": None}, linear=_Integrator())  # a hybrid's whole trajectories
     assert "join" not in whole.changes and whole.changes["batch_size"] == 2
+    no_valid = pieces(True).replace(splits={k: v for k, v in pieces(True).splits.items() if k != "valid"})
+    assert "join" not in plan_training(no_valid, {}, linear=_Integrator()).changes  # random validation pieces: gaps
 
 
 def test_what_the_user_gives_is_kept_as_given():

@@ -8,7 +8,8 @@ the linear model's slowest time scale:
 
 - ``join``: records that the dataset says are consecutive pieces of one recording
   (``source["contiguous"]``, as the robot benchmark's 605-sample pieces) are joined end to end, so that
-  the windows below may be as long as the free runs the model must survive, not cut at the pieces' seams;
+  the windows below may be as long as the free runs the model must survive, not cut at the pieces' seams
+  (only with a valid split of the dataset's own: pieces carved out for validation would leave gaps);
 - ``truncate``: whole trajectories when the longest is at most two windows long, else windows of
   ``clamp(5 tau, MIN_WINDOW, MAX_WINDOW)`` samples (``tau`` the slowest time constant in samples, so
   that an error of the initial state estimated at a window's start decays to under 1 % within it;
@@ -90,7 +91,9 @@ def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1
         lines.append(validation_line(ds, frac))
     lengths = np.asarray(ds.train.lengths, dtype=float) * (1.0 - changes.get("valid_fraction", 0.0))
     whole = "truncate" in given and given["truncate"] is None  # whole trajectories asked for (a hybrid's plan)
-    if "join" not in given and not whole and len(lengths) > 1 and bool(ds.source.get("contiguous")):
+    # joined only with a valid split of its own: validation pieces carved at random would leave gaps at the seams
+    if ("join" not in given and not whole and len(lengths) > 1 and ds.valid is not None
+            and bool(ds.source.get("contiguous"))):
         changes["join"] = True
         lines.append(f"records: the {len(lengths)} training records joined end to end (the dataset says they are "
                      "consecutive pieces of one recording; --no-join keeps them apart)")
