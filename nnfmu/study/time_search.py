@@ -126,7 +126,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
         run_config = tune.RunConfig(name="nnfmu-time-search", verbose=0, storage_path=str(Path(tmp) / "ray"),
                                     callbacks=[Echo(points, scheduler)] if progress else None)
         tune_config = tune.TuneConfig(metric=METRIC, mode="min", scheduler=scheduler, search_alg=searcher,
-                                      num_samples=len(points), max_concurrent_trials=cpus, reuse_actors=True,
+                                      num_samples=len(points), max_concurrent_trials=cpus, reuse_actors=False,
                                       time_budget_s=max(1.0, end - time.monotonic() + reserve / 2))
         stopped_by = None
         try:
@@ -157,8 +157,10 @@ def _quiet_ray():
         lg.setLevel(level)
     try:
         # Ctrl-C raises KeyboardInterrupt here (Ray Tune's own handler would end the search quietly); a worker
-        # whose trial ASHA stopped waits for it to write its checkpoint before the next trial (default 2 s: on
-        # busy cores the reuse failed and the next trial with it); the workers inherit this environment
+        # whose trial ASHA stopped waits for it to write its checkpoint (default 2 s); the workers inherit this
+        # environment. Every trial gets a fresh worker (reuse_actors=False): with Ray 2.60 a reused worker whose
+        # stopped trial had not ended failed ("reuse requires reset_config()") and its next trial then held the
+        # core, with no epoch, until the search's time was up (2 of the robot's 5 trials)
         with mock.patch.dict(os.environ, {"RAY_AIR_NEW_OUTPUT": "0", "TUNE_DISABLE_SIGINT_HANDLER": "1",
                                           "TUNE_FUNCTION_THREAD_TIMEOUT_S": str(THREAD_TIMEOUT_S)}):
             yield
