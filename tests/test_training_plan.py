@@ -156,3 +156,12 @@ def test_train_cli_starts_on_the_linear_path_says_its_plan_and_can_be_told_other
     capsys.readouterr()
     assert main([*base, "--linear-path", str(tmp_path / "none.json"), "-o", str(tmp_path / "d.pt")]) == 2
     assert "not found" in capsys.readouterr().err and not (tmp_path / "d.pt").exists()
+
+
+def test_the_train_cli_says_join_no_join_or_nothing():
+    """--join and --no-join reach the plan as given; neither leaves the choice to the plan."""
+    from nnfmu.cli import build_parser
+
+    base = ["train", "--data", "d", "--arch", "gru", "-o", "m.pt"]
+    assert [build_parser().parse_args(base + extra).join for extra in ([], ["--join"], ["--no-join"])] == \
+        [None, True, False]
