@@ -9,9 +9,10 @@ For each dataset folder and architecture this runs exactly what a new user types
 
 and prints one table: the test NRMSE (free run in fmpy) of the linear model and of each network, its
 ratio to the linear model, and the CPU seconds (user + system, of the command and its children) of each
-cell (each training's output is kept in ``WORK/DATASET/ARCH.log``). ``--max-minutes N`` adds that flag to every training (the time-budget search over the knobs left out);
-the architecture ``search`` names the cell that gives no ``--arch``, so that the search also chooses it. Pin it to
-one core on a shared machine (``taskset -c 1``) and name the CPU next to the figures. Not part of the tests.
+cell (each training's output is kept in ``WORK/DATASET/ARCH.log``). ``--max-minutes N`` adds that flag to
+every training (the time-budget search over the knobs left out); the architecture ``search`` names the cell
+that gives no ``--arch``, so that the search also chooses it. Pin it to one core on a shared machine
+(``taskset -c 1``) and name the CPU next to the figures. Not part of the tests.
 
     python benchmarks/defaults_table.py data/slider data/valve --archs gru mlp --work /tmp/defaults
 """
