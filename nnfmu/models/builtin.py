@@ -2,7 +2,7 @@
 
 Their config is :class:`~nnfmu.models.ModelConfig`; their CasADi step and init are in
 :mod:`nnfmu.export.torch_to_casadi` and :mod:`nnfmu.export.init_window`, named lazily so that
-``models`` imports nothing above it. The recurrent ones run their free run as compiled C
+``models`` imports nothing above it. The recurrent ones and the TCN run their free run as compiled C
 (:mod:`nnfmu.training.compiled_rollout`). ``search_rank``: the order in which ``nnfmu train
 --max-minutes`` tries them; ``grid``: the depths of the paper-size tune grid.
 """
@@ -27,7 +27,8 @@ for _record in (
       for arch, rank in (("rnn", 4), ("lstm", 1), ("gru", 0))),
     Architecture(name="tcn", config_class=_CONFIG, model_class="nnfmu.models.tcn:TCNStepModel",
                  summary="temporal convolutional network (dilated causal convolutions)",
-                 casadi_step=_STEP + "tcn_step", casadi_init=_INIT + "tcn_init", grid={"layers": (3, 4)},
+                 casadi_step=_STEP + "tcn_step", casadi_init=_INIT + "tcn_init", rollout_cell="tcn",
+                 grid={"layers": (3, 4)},
                  search_rank=2),
 ):
     register_architecture(_record)

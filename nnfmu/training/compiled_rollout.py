@@ -1,26 +1,28 @@
-"""The free run of the recurrent networks (RNN, LSTM, GRU) as compiled C, forward and backward.
+"""The free run of the recurrent networks (RNN, LSTM, GRU) and the TCN as compiled C, forward and backward.
 
 Parallel training back-propagates through hundreds of steps of a small network. In
-torch each step is 15-20 small operations and as many autograd nodes; at the batch
+torch each step is 15-20 small operations (a TCN's, a few dozen) and as many autograd nodes; at the batch
 sizes used here their fixed cost of a few microseconds each, not arithmetic, bounds
 the throughput (docs/scaling.md has the measurements). ``rollout.c`` runs the whole
-free run in one call and back-propagation through time in another, with the same
-operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`::
+free run of a recurrent network in one call and back-propagation through time in another, with the same
+operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`; ``tcn_rollout.c``
+(:mod:`nnfmu.training.compiled_tcn`) does the same for the TCN's incremental step::
 
     rollout = compiled_rollout(model)        # None where the C path does not apply
     ys = rollout(un, yn0)                    # (B, T, n_u), (B, n_y) -> (B, T, n_y), as model.rollout_normalised
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
-It applies to a model whose architecture's record names the cell of ``rollout.c`` that computes its step
-(``Architecture.rollout_cell``: the RNN, LSTM and GRU) and that is exactly the record's model class (the
-layout of :class:`~nnfmu.models.RecurrentStepModel`), and to a
+It applies to a model whose architecture's record names the compiled cell that computes its step
+(``Architecture.rollout_cell``: ``rnn``, ``lstm``, ``gru`` in ``rollout.c``, ``tcn`` in ``tcn_rollout.c``) and
+that is exactly the record's model class (the layout of :class:`~nnfmu.models.RecurrentStepModel` or
+:class:`~nnfmu.models.tcn.TCNStepModel`), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
 the CPU in float32 or float64, with no active dropout or feedback noise (eval mode, or both zero),
 no init window and no increment mode. The library is compiled at first use with
 the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
-like the compiled physics (``$NNFMU_CACHE_DIR``). Without a compiler, or if compiling
-fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
+like the compiled physics (``$NNFMU_CACHE_DIR``; :mod:`nnfmu.training.rollout_library`). Without a compiler, or if
+compiling fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
 (slower, same numbers). ``NNFMU_COMPILED_ROLLOUT=0`` turns the C path off.
 Values and gradients equal torch's to rounding (tested in float64 to 1e-12, with and without a linear path).
 """
@@ -30,21 +32,19 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
-import warnings
-from pathlib import Path
 
 import torch
 
-from nnfmu.errors import FmuBuildError, SimulationError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
+from nnfmu.training import compiled_tcn
+from nnfmu.training.rollout_library import FIXED, REALS, check, library_or_none, path_arguments, pointers, ptr
+from nnfmu.training.rollout_library import library as _library  # noqa: F401 (tests build it directly)
 
-_SOURCE = Path(__file__).with_name("rollout.c")
-_FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
+_library_or_none = library_or_none  # tests clear its cache
+
 _CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}  # rollout.c's cells; an 'rnn' by its activation
-_REALS = {torch.float32: "float", torch.float64: "double"}
-_FIXED = ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d")  # the linear path's fixed model, in rollout.c's order
 ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
 
 
@@ -59,9 +59,13 @@ def compiled_rollout(model: StepModel):
     """
     if not _applies(model):
         return None
-    library = _library_or_none(model.u_mean.dtype)
+    net = model.net if type(model) is LinearPathStepModel else model
+    tcn = architectures.architecture(net.config.arch).rollout_cell == "tcn"
+    library = library_or_none(model.u_mean.dtype, "tcn_rollout" if tcn else "rollout")
     if library is None:
         return None
+    if tcn:
+        return functools.partial(compiled_tcn.apply, model, library)
     return functools.partial(_apply, model, library)
 
 
@@ -97,12 +101,12 @@ def _applies(model: StepModel) -> bool:
     net = model.net if type(model) is LinearPathStepModel else model
     record = architectures.architecture(net.config.arch)
     if record.rollout_cell is None or type(net) is not record.get("model_class"):
-        return False  # a subclass may compute something else than rollout.c
+        return False  # a subclass may compute something else than the C code
     if any(c.init_window > 1 or c.increment for c in (model.config, net.config)):
         return False  # the encoder's initial state and the increment readout are torch's only
-    dtype = net.readout.weight.dtype
-    tensors = [*model.parameters(), *(getattr(model, name) for name in _FIXED if net is not model)]
-    if dtype not in _REALS or any(t.device.type != "cpu" or t.dtype != dtype for t in tensors):
+    dtype = next(net.parameters()).dtype
+    tensors = [*model.parameters(), *(getattr(model, name) for name in FIXED if net is not model)]
+    if dtype not in REALS or any(t.device.type != "cpu" or t.dtype != dtype for t in tensors):
         return False
     return not (model.training and (net.config.dropout > 0 or model.feedback_noise))
 
@@ -122,13 +126,9 @@ def _weights(model: StepModel) -> list[torch.Tensor]:
 def _apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
     if type(model) is not LinearPathStepModel:
         return _Rollout.apply(model, None, library, un, yn0, None, *_weights(model))
-    fixed = [getattr(model, name).detach().contiguous() for name in _FIXED]
+    fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
     z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
     return _Rollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
-
-
-def _pointers(tensors) -> ctypes.Array:
-    return (ctypes.c_void_p * len(tensors))(*(t.data_ptr() for t in tensors))
 
 
 def _header(model: StepModel, B: int, T: int) -> tuple:
@@ -158,10 +158,10 @@ class _Rollout(torch.autograd.Function):
         width = library.nnfmu_rollout_saved_width(_cell(model), c.hidden)
         saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None
-        status = library.nnfmu_rollout_forward(*_header(model, B, T), _pointers(weights), _ptr(un_t), _ptr(yn0),
-                                               _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved), *_path(fixed),
-                                               _ptr(z0), _ptr(ns))
-        _check(status, "free run", B, T)
+        status = library.nnfmu_rollout_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0),
+                                               ptr(ys_t), ptr(hs), ptr(cs), ptr(saved), *path_arguments(fixed),
+                                               ptr(z0), ptr(ns))
+        check(status, "free run", B, T)
         if keep:
             ctx.model, ctx.library, ctx.fixed = model, library, fixed
             ctx.save_for_backward(un_t, ys_t, hs, cs, saved, ns, *weights)
@@ -175,56 +175,11 @@ class _Rollout(torch.autograd.Function):
         gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
         gyn0 = gys_t.new_empty(gys_t.shape[1:])
         gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
-        status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), _pointers(weights), _ptr(un_t),
-                                                    _ptr(ys_t), _ptr(hs), _ptr(cs), _ptr(saved), _ptr(gys_t),
-                                                    _pointers(grads), _ptr(gyn0), *_path(ctx.fixed), _ptr(ns),
-                                                    _ptr(gz0))
-        _check(status, "back-propagation through the free run", B, T)
+        status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t),
+                                                    ptr(ys_t), ptr(hs), ptr(cs), ptr(saved), ptr(gys_t),
+                                                    pointers(grads), ptr(gyn0), *path_arguments(ctx.fixed), ptr(ns),
+                                                    ptr(gz0))
+        check(status, "back-propagation through the free run", B, T)
         needed = ctx.needs_input_grad
         return (None, None, None, None, gyn0 if needed[4] else None, gz0 if needed[5] else None,
                 *(g if need else None for g, need in zip(grads, needed[6:])))
-
-
-def _path(fixed) -> tuple:
-    """The linear path's ``n_z, lin`` arguments of rollout.c (``0, NULL`` without a path)."""
-    return (0, None) if fixed is None else (fixed[0].shape[0], _pointers(fixed))
-
-
-def _ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
-    return ctypes.c_void_p(None if t is None else t.data_ptr())
-
-
-def _check(status: int, what: str, B: int, T: int) -> None:
-    if status != 0:
-        raise SimulationError(f"the compiled {what} ran out of memory at batch {B} x {T} steps; "
-                              "use a smaller batch_size or truncate the trajectories")
-
-
-# ---- the library -------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
-def _library_or_none(dtype: torch.dtype) -> ctypes.CDLL | None:
-    try:
-        return _library(dtype)
-    except (FmuBuildError, OSError) as exc:
-        warnings.warn(f"the recurrent free run runs in torch instead of compiled C (slower, same values): "
-                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=3)
-        return None
-
-
-def _library(dtype: torch.dtype) -> ctypes.CDLL:
-    """Compile ``rollout.c`` for ``dtype`` once per machine (cached by source, flags and CPU) and load it."""
-    from nnfmu import cbuild
-
-    flags = (*_FLAGS, f"-DNNFMU_REAL={_REALS[dtype]}")
-    # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
-    target = cbuild.build_cached(f"rollout_{_REALS[dtype]}", _SOURCE.read_text(), flags=flags,
-                                 link_choices=(("-lmvec", "-lm"), ("-lm",)),
-                                 what="compiling the recurrent free run (nnfmu/training/rollout.c)")
-    lib = cbuild.load(target)
-    header, path = [ctypes.c_int] * 8 + [ctypes.c_double], [ctypes.c_int] + [ctypes.c_void_p] * 3
-    lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path
-    lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 9 + path
-    lib.nnfmu_rollout_saved_width.argtypes = [ctypes.c_int, ctypes.c_int]
-    for entry in (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width):
-        entry.restype = ctypes.c_int
-    return lib

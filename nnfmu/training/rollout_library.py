@@ -1,0 +1,87 @@
+"""The compiled free runs' C libraries and the ctypes plumbing of their calls (:mod:`nnfmu.training.compiled_rollout`).
+
+``rollout.c`` (the recurrent cells) and ``tcn_rollout.c`` (the TCN) share ``rollout_kernels.h``, which
+:func:`source` pastes in place of the include line, so that a cached library is keyed by all it was compiled from.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import warnings
+from pathlib import Path
+
+import torch
+
+from nnfmu.errors import FmuBuildError, SimulationError
+
+_HERE = Path(__file__).parent
+_FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
+REALS = {torch.float32: "float", torch.float64: "double"}
+FIXED = ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d")  # the linear path's fixed model, in the C files' order
+
+
+def pointers(tensors) -> ctypes.Array:
+    """A C array of the tensors' data pointers (``const real **``)."""
+    return (ctypes.c_void_p * len(tensors))(*(t.data_ptr() for t in tensors))
+
+
+def path_arguments(fixed) -> tuple:
+    """The linear path's ``n_z, lin`` arguments (``0, NULL`` without a path); ``fixed``: ``[A, B, b, C, d]`` or None."""
+    return (0, None) if fixed is None else (fixed[0].shape[0], pointers(fixed))
+
+
+def ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
+    return ctypes.c_void_p(None if t is None else t.data_ptr())
+
+
+def check(status: int, what: str, B: int, T: int) -> None:
+    """SimulationError when a C call says its memory ran out (status != 0)."""
+    if status != 0:
+        raise SimulationError(f"the compiled {what} ran out of memory at batch {B} x {T} steps; "
+                              "use a smaller batch_size or truncate the trajectories")
+
+
+@functools.lru_cache(maxsize=None)
+def library_or_none(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL | None:
+    """:func:`library`, or None with a one-time RuntimeWarning when it cannot be compiled or loaded."""
+    try:
+        return library(dtype, stem)
+    except (FmuBuildError, OSError) as exc:
+        warnings.warn(f"the free run runs in torch instead of compiled C (slower, same values): "
+                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=3)
+        return None
+
+
+def source(stem: str) -> str:
+    """``<stem>.c`` with ``rollout_kernels.h`` pasted in place of its include line: what is compiled (and hashed)."""
+    kernels = (_HERE / "rollout_kernels.h").read_text()
+    return (_HERE / f"{stem}.c").read_text().replace('#include "rollout_kernels.h"', kernels)
+
+
+def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
+    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``tcn_rollout``: the TCN) for ``dtype`` once per
+    machine (cached by source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``) and load it."""
+    from nnfmu import cbuild
+
+    flags = (*_FLAGS, f"-DNNFMU_REAL={REALS[dtype]}")
+    # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
+    target = cbuild.build_cached(f"{stem}_{REALS[dtype]}", source(stem), flags=flags,
+                                 link_choices=(("-lmvec", "-lm"), ("-lm",)),
+                                 what=f"compiling the free run (nnfmu/training/{stem}.c)")
+    lib = cbuild.load(target)
+    path = [ctypes.c_int] + [ctypes.c_void_p] * 3
+    if stem == "tcn_rollout":
+        header = [ctypes.c_int] * 9 + [ctypes.c_double]
+        lib.nnfmu_tcn_forward.argtypes = header + [ctypes.c_void_p] * 6 + path
+        lib.nnfmu_tcn_backward.argtypes = header + [ctypes.c_void_p] * 8 + path
+        entries = (lib.nnfmu_tcn_forward, lib.nnfmu_tcn_backward)
+    else:
+        header = [ctypes.c_int] * 8 + [ctypes.c_double]
+        lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path
+        lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 9 + path
+        lib.nnfmu_rollout_saved_width.argtypes = [ctypes.c_int, ctypes.c_int]
+        entries = (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width)
+    for entry in entries:
+        entry.restype = ctypes.c_int
+    return lib
