@@ -118,7 +118,7 @@ class Architecture:
     to_casadi, casadi_model : ``(model, *, verify) -> (init, step)``, ``(model, *, name) -> CasadiModel``, optional
         A whole export instead of ``casadi_step``/``casadi_init`` (a model with ports of its own, such as the
         hybrid's physical parameters), used by :func:`nnfmu.export.to_casadi` and :func:`~nnfmu.export.casadi_model`.
-    rollout_cell : {'rnn', 'lstm', 'gru', 'tcn'}, optional
+    rollout_cell : {'rnn', 'lstm', 'gru', 'tcn', 'mlp'}, optional
         The cell of the compiled free run (:mod:`nnfmu.training.compiled_rollout`) that computes this
         architecture's step, for a model of exactly ``model_class``; None: torch runs the free run.
     training_rollout : ``model -> free_run or None``, optional

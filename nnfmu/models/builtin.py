@@ -2,7 +2,7 @@
 
 Their config is :class:`~nnfmu.models.ModelConfig`; their CasADi step and init are in
 :mod:`nnfmu.export.torch_to_casadi` and :mod:`nnfmu.export.init_window`, named lazily so that
-``models`` imports nothing above it. The recurrent ones and the TCN run their free run as compiled C
+``models`` imports nothing above it. All five run their free run as compiled C
 (:mod:`nnfmu.training.compiled_rollout`). ``search_rank``: the order in which ``nnfmu train
 --max-minutes`` tries them; ``grid``: the depths of the paper-size tune grid.
 """
@@ -18,8 +18,8 @@ _INIT = "nnfmu.export.init_window:"
 for _record in (
     Architecture(name="mlp", config_class=_CONFIG, model_class="nnfmu.models.mlp:MLPStepModel",
                  summary="multilayer perceptron on a window of past samples",
-                 casadi_step=_STEP + "window_step", casadi_init=_INIT + "window_init", grid={"layers": (2, 3)},
-                 search_rank=3),
+                 casadi_step=_STEP + "window_step", casadi_init=_INIT + "window_init", rollout_cell="mlp",
+                 grid={"layers": (2, 3)}, search_rank=3),
     *(Architecture(name=arch, config_class=_CONFIG, model_class="nnfmu.models.recurrent:RecurrentStepModel",
                    summary=f"{arch.upper()} recurrent network", casadi_step=_STEP + "recurrent_step",
                    casadi_init=_INIT + "recurrent_init", rollout_cell=arch, grid={"layers": (1, 2)},

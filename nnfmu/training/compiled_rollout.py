@@ -1,21 +1,23 @@
-"""The free run of the recurrent networks (RNN, LSTM, GRU) and the TCN as compiled C, forward and backward.
+"""The free run of the recurrent networks (RNN, LSTM, GRU), the TCN and the MLP as compiled C, forward and backward.
 
 Parallel training back-propagates through hundreds of steps of a small network. In
 torch each step is 15-20 small operations (a TCN's, a few dozen) and as many autograd nodes; at the batch
 sizes used here their fixed cost of a few microseconds each, not arithmetic, bounds
 the throughput (docs/scaling.md has the measurements). ``rollout.c`` runs the whole
 free run of a recurrent network in one call and back-propagation through time in another, with the same
-operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`; ``tcn_rollout.c``
-(:mod:`nnfmu.training.compiled_tcn`) does the same for the TCN's incremental step::
+operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`; ``window_rollout.c``
+(:mod:`nnfmu.training.compiled_window`) does the same for the window networks' step (the TCN's dilated layers
+over their delay lines, the MLP's layers over its window)::
 
     rollout = compiled_rollout(model)        # None where the C path does not apply
     ys = rollout(un, yn0)                    # (B, T, n_u), (B, n_y) -> (B, T, n_y), as model.rollout_normalised
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
 It applies to a model whose architecture's record names the compiled cell that computes its step
-(``Architecture.rollout_cell``: ``rnn``, ``lstm``, ``gru`` in ``rollout.c``, ``tcn`` in ``tcn_rollout.c``) and
-that is exactly the record's model class (the layout of :class:`~nnfmu.models.RecurrentStepModel` or
-:class:`~nnfmu.models.tcn.TCNStepModel`), and to a
+(``Architecture.rollout_cell``: ``rnn``, ``lstm``, ``gru`` in ``rollout.c``, ``tcn``, ``mlp`` in
+``window_rollout.c``) and that is exactly the record's model class (the layout of
+:class:`~nnfmu.models.RecurrentStepModel`, :class:`~nnfmu.models.tcn.TCNStepModel` or
+:class:`~nnfmu.models.mlp.MLPStepModel`), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
 the CPU in float32 or float64, with no active dropout or feedback noise (eval mode, or both zero),
@@ -38,7 +40,7 @@ import torch
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.training import compiled_tcn
+from nnfmu.training import compiled_window
 from nnfmu.training.rollout_library import FIXED, REALS, check, library_or_none, path_arguments, pointers, ptr
 from nnfmu.training.rollout_library import library as _library  # noqa: F401 (tests build it directly)
 
@@ -60,12 +62,12 @@ def compiled_rollout(model: StepModel):
     if not _applies(model):
         return None
     net = model.net if type(model) is LinearPathStepModel else model
-    tcn = architectures.architecture(net.config.arch).rollout_cell == "tcn"
-    library = library_or_none(model.u_mean.dtype, "tcn_rollout" if tcn else "rollout")
+    window = architectures.architecture(net.config.arch).rollout_cell in compiled_window.KINDS
+    library = library_or_none(model.u_mean.dtype, "window_rollout" if window else "rollout")
     if library is None:
         return None
-    if tcn:
-        return functools.partial(compiled_tcn.apply, model, library)
+    if window:
+        return functools.partial(compiled_window.apply, model, library)
     return functools.partial(_apply, model, library)
 
 

@@ -18,8 +18,8 @@ the linear model's slowest time scale:
   makes at least about four optimiser steps;
 - the budget in optimiser steps: ``epochs`` and ``patience`` are :data:`BUDGET_STEPS` and
   :data:`PATIENCE_STEPS` divided by the steps of an epoch, within :data:`DEFAULT_MINUTES` of wall time
-  (a compiled GRU makes thousands of steps a minute, a torch-looped MLP on 10 x 400 samples a few a
-  second: the time is the budget that binds for slow networks); with
+  (a GRU-32 on 10 x 400 samples makes thousands of steps a minute, a wide or deep network, a long record or a
+  network in torch far fewer: the time is the budget that binds for slow networks); with
   ``max_minutes`` alone the time is the budget;
 - ``valid_fraction`` (one record without a valid split): a tail long enough to rank models over a
   horizon like the test's, ``min(test length, 25 %)`` of the record and at least 10 %, plus the init

@@ -1,4 +1,4 @@
-/* What the compiled free runs share (rollout.c: the recurrent networks; tcn_rollout.c: the TCN): the real type,
+/* What the compiled free runs share (rollout.c: the recurrent networks; window_rollout.c: the TCN): the real type,
  * vector exp/tanh, the matrix kernels, and the linear path's step forwards and backwards.
  *
  * nnfmu/training/compiled_rollout.py pastes this file in place of its #include line before compiling, so that the

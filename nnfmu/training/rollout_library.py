@@ -1,6 +1,6 @@
 """The compiled free runs' C libraries and the ctypes plumbing of their calls (:mod:`nnfmu.training.compiled_rollout`).
 
-``rollout.c`` (the recurrent cells) and ``tcn_rollout.c`` (the TCN) share ``rollout_kernels.h``, which
+``rollout.c`` (the recurrent cells) and ``window_rollout.c`` (the TCN and the MLP) share ``rollout_kernels.h``, which
 :func:`source` pastes in place of the include line, so that a cached library is keyed by all it was compiled from.
 """
 
@@ -60,7 +60,7 @@ def source(stem: str) -> str:
 
 
 def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
-    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``tcn_rollout``: the TCN) for ``dtype`` once per
+    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``window_rollout``: the TCN and the MLP) for ``dtype`` once per
     machine (cached by source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``) and load it."""
     from nnfmu import cbuild
 
@@ -71,11 +71,11 @@ def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
                                  what=f"compiling the free run (nnfmu/training/{stem}.c)")
     lib = cbuild.load(target)
     path = [ctypes.c_int] + [ctypes.c_void_p] * 3
-    if stem == "tcn_rollout":
-        header = [ctypes.c_int] * 9 + [ctypes.c_double]
-        lib.nnfmu_tcn_forward.argtypes = header + [ctypes.c_void_p] * 6 + path
-        lib.nnfmu_tcn_backward.argtypes = header + [ctypes.c_void_p] * 8 + path
-        entries = (lib.nnfmu_tcn_forward, lib.nnfmu_tcn_backward)
+    if stem == "window_rollout":
+        header = [ctypes.c_int] * 10 + [ctypes.c_double]
+        lib.nnfmu_window_forward.argtypes = header + [ctypes.c_void_p] * 6 + path
+        lib.nnfmu_window_backward.argtypes = header + [ctypes.c_void_p] * 8 + path
+        entries = (lib.nnfmu_window_forward, lib.nnfmu_window_backward)
     else:
         header = [ctypes.c_int] * 8 + [ctypes.c_double]
         lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path

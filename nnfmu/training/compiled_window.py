@@ -1,11 +1,12 @@
-"""The TCN's free run as compiled C (``tcn_rollout.c``), forward and backward, for :mod:`nnfmu.training.compiled_rollout`.
+"""The window networks' free run (TCN, MLP) as compiled C (``window_rollout.c``), for :mod:`~nnfmu.training.compiled_rollout`.
 
 Same contract as the recurrent networks' (``rollout(un, yn0) -> ys``, back-propagated by torch's autograd): a
-:class:`~nnfmu.models.tcn.TCNStepModel`, or a :class:`~nnfmu.models.linear_path.LinearPathStepModel` on one, in
-eval mode or with no active dropout or feedback noise, without an init window or increment mode (the conditions
-:func:`nnfmu.training.compiled_rollout.compiled_rollout` checks). In torch each step of the TCN is a few dozen small
-operations per layer, 2 ms a step forward and backward at batch 9 on one thread: the slowest free run of the five
-networks (docs/accuracy.md). Values and gradients equal torch's to rounding (tested in float64).
+:class:`~nnfmu.models.tcn.TCNStepModel` or :class:`~nnfmu.models.mlp.MLPStepModel`, or a
+:class:`~nnfmu.models.linear_path.LinearPathStepModel` on one, in eval mode or with no active dropout or feedback
+noise, without an init window or increment mode (the conditions
+:func:`nnfmu.training.compiled_rollout.compiled_rollout` checks). In torch a step of the TCN is a few dozen small
+operations, 2 ms forward and backward at batch 9 on one thread, and the MLP's about 0.9 ms: the slowest free runs
+of the five networks (docs/accuracy.md). Values and gradients equal torch's to rounding (tested in float64).
 """
 
 from __future__ import annotations
@@ -18,35 +19,40 @@ from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
 from nnfmu.training.rollout_library import FIXED, check, path_arguments, pointers, ptr
 
-ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # tcn_rollout.c's codes
+ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # window_rollout.c's codes
+KINDS = {"tcn": 0, "mlp": 1}
 
 
 def apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-    """The free run of ``model`` (a TCN, or a linear path on one): (B, T, n_u), (B, n_y) -> (B, T, n_y), normalised."""
+    """The free run of ``model`` (a TCN or MLP, or a linear path on one): (B, T, n_u), (B, n_y) -> (B, T, n_y),
+    normalised."""
     if type(model) is not LinearPathStepModel:
-        return _TCNRollout.apply(model, None, library, un, yn0, None, *_weights(model))
+        return _WindowRollout.apply(model, None, library, un, yn0, None, *_weights(model))
     fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
     z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
-    return _TCNRollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
+    return _WindowRollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
 
 
 def _weights(model: StepModel) -> list[torch.Tensor]:
-    out = []
-    for conv in model.convs:
-        out += [conv.weight, conv.bias]
-    return out + [model.head.weight, model.head.bias]
+    """Per layer its weight and bias, then the output layer's, in window_rollout.c's order."""
+    if model.config.arch == "tcn":
+        layers = [*model.convs, model.head]
+    else:  # the MLP's Linear modules; the last is its output layer
+        layers = [m for m in model.net if isinstance(m, torch.nn.Linear)]
+    return [t for layer in layers for t in (layer.weight, layer.bias)]
 
 
 def _header(model: StepModel, B: int, T: int) -> tuple:
     c = model.config
-    return (B, T, c.n_u, c.n_y, c.hidden, c.layers, c.kernel_size, ACTIVATIONS[c.activation], int(c.skip),
+    taps = c.kernel_size if c.arch == "tcn" else c.window
+    return (KINDS[c.arch], B, T, c.n_u, c.n_y, c.hidden, c.layers, taps, ACTIVATIONS[c.activation], int(c.skip),
             float(c.skip_scale))
 
 
-class _TCNRollout(torch.autograd.Function):
-    """Forward: ``nnfmu_tcn_forward``. Backward: ``nnfmu_tcn_backward``. Time-major inside.
+class _WindowRollout(torch.autograd.Function):
+    """Forward: ``nnfmu_window_forward``. Backward: ``nnfmu_window_backward``. Time-major inside.
 
-    ``model``: the TCN; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z) its initial state,
+    ``model``: the TCN or MLP; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z) its initial state,
     and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None.
     """
 
@@ -64,9 +70,9 @@ class _TCNRollout(torch.autograd.Function):
         hs = un_t.new_empty(shape) if keep else None
         kept = un_t.new_empty(shape) if keep else None
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None
-        status = library.nnfmu_tcn_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0), ptr(ys_t),
+        status = library.nnfmu_window_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0), ptr(ys_t),
                                            ptr(hs), ptr(kept), *path_arguments(fixed), ptr(z0), ptr(ns))
-        check(status, "TCN free run", B, T)
+        check(status, "free run", B, T)
         if keep:
             ctx.model, ctx.library, ctx.fixed = model, library, fixed
             ctx.save_for_backward(un_t, ys_t, hs, kept, ns, *weights)
@@ -80,10 +86,10 @@ class _TCNRollout(torch.autograd.Function):
         gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
         gyn0 = gys_t.new_empty(gys_t.shape[1:])
         gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
-        status = ctx.library.nnfmu_tcn_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t), ptr(ys_t),
+        status = ctx.library.nnfmu_window_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t), ptr(ys_t),
                                                 ptr(hs), ptr(kept), ptr(gys_t), pointers(grads), ptr(gyn0),
                                                 *path_arguments(ctx.fixed), ptr(ns), ptr(gz0))
-        check(status, "back-propagation through the TCN free run", B, T)
+        check(status, "back-propagation through the free run", B, T)
         needed = ctx.needs_input_grad
         return (None, None, None, None, gyn0 if needed[4] else None, gz0 if needed[5] else None,
                 *(g if need else None for g, need in zip(grads, needed[6:])))

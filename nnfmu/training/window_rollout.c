@@ -1,18 +1,25 @@
-/* Free run of a TCN step network with output feedback, forward and back-propagation through time.
+/* Free run of a window network (TCN or MLP) with output feedback, forward and back-propagation through time.
  *
  * nnfmu/training/compiled_rollout.py compiles this file once per machine (REAL = float and double) and
- * calls it from torch. It computes exactly what TCNStepModel's free run computes (nnfmu/models/tcn.py, its
- * step in nnfmu/models/tcn_state.py), for L dilated layers of kernel K, without dropout or increment mode:
+ * calls it from torch. It computes exactly what the free run of TCNStepModel (nnfmu/models/tcn.py, its step in
+ * nnfmu/models/tcn_state.py) or MLPStepModel (nnfmu/models/mlp.py, window.py) computes, for L layers of width
+ * H, without dropout or increment mode. Layer i reads K_i taps of its input, d_i steps apart:
  *
  *     s_k   = [y_k, u_k]                                               the newest sample, y_k fed back
- *     h^0_k = act(b_0 + sum_j W_0[:, :, j] s_{k - (K-1-j)})
- *     h^i_k = h^{i-1}_k + act(b_i + sum_j W_i[:, :, j] h^{i-1}_{k - (K-1-j) 2^i})     (i >= 1, residual)
+ *     h^0_k = act(b_0 + sum_j W_0[j] s_{k - (K_0-1-j) d_0})
+ *     h^i_k = [h^{i-1}_k +] act(b_i + sum_j W_i[j] h^{i-1}_{k - (K_i-1-j) d_i})     (i >= 1)
  *     n_k   = W_o h^{L-1}_k + b_o;    y_{k+1} = y_k + skip * n_k (skip)   or   n_k
  *
- * Before k = 0 the model is at rest (tcn_state.init: every delay line holds the column its layer's input has
- * when all past samples are s_0). That column is h^{i}_0 itself: at k = 0 every tap of every layer reaches back
- * to the rest, so h^i_0 is the layer over a constant input. Every tap before 0 therefore reads (and
- * back-propagates into) step 0, which is the same function of the weights, y_0 and u_0 as torch's rest state.
+ * TCN: K_i = the kernel, d_i = 2^i, the residual [h^{i-1}_k +] for i >= 1, W_i[j] = conv.weight[:, :, j].
+ * MLP: layer 0 reads the window (K_0 = its length L_w, d_0 = 1), the others one column (K_i = 1), no
+ * residual; W_0[j] = the columns of sample j in the first Linear's weight (the window is flattened oldest
+ * sample first, each sample's channels together).
+ *
+ * Before k = 0 the model is at rest (tcn_state.init, WindowStepModel._init_norm: every past sample is s_0,
+ * and every TCN delay line holds the column its layer's input then has). That column is h^i_0 itself: at
+ * k = 0 every tap of every layer reaches back to the rest, so h^i_0 is the layer over a constant input. Every
+ * tap before 0 therefore reads (and back-propagates into) step 0, which is the same function of the weights,
+ * y_0 and u_0 as torch's rest state.
  *
  * With a linear path of n_z > 0 states (LinearPathStepModel, nnfmu/models/linear_path.py), n_k is the
  * network's raw output and the output is the linear model's plus a learned correction, as in rollout.c:
@@ -20,7 +27,8 @@
  *     z_{k+1} = A z_k + B u_k + b + G n_k;   y_{k+1} = C z_{k+1} + d + alpha * n_k
  *
  * Layout: time-major. un (T, B, n_u), yn0 (B, n_y), ys (T, B, n_y) with ys[0] = yn0. Parameters in torch's
- * layout: per layer W_i (H, C_i, K) (nn.Conv1d: C_0 = n_y + n_u, C_i = H) and b_i (H); then W_o (n_y, H),
+ * layout: per layer W_i and b_i (H), C_0 = n_y + n_u, C_i = H: the TCN's nn.Conv1d weight (H, C_i, K), channel
+ * major; the MLP's nn.Linear weights (H, K_0 C_0), sample major, and (H, H); then W_o (n_y, H),
  * b_o (n_y); with a linear path G (n_z, n_y), alpha (n_y); lin = {A, B, b, C, d} row-major, held fixed.
  * For the backward pass the forward pass stores every h^i_k and what the activation's derivative needs
  * (the activation, or for silu its argument), both (T - 1, L, B, H), and with a path the raw outputs
@@ -29,14 +37,16 @@
 #include "rollout_kernels.h"
 
 enum { ACT_TANH = 0, ACT_RELU = 1, ACT_SIGMOID = 2, ACT_ELU = 3, ACT_SILU = 4 };
+enum { TCN = 0, MLP = 1 };
 
 typedef struct {
-  int B, T, n_u, n_y, H, L, K, act, has_skip;
+  int kind, B, T, n_u, n_y, H, L, K, act, has_skip;  /* K: the TCN's kernel, the MLP's window */
   real skip;
 } shape_t;
 
 typedef struct {    /* one layer's weights, one matrix per tap j (oldest first) */
-  int C;            /* input channels */
+  int C, K, d;      /* input channels, taps, steps between taps */
+  int residual;     /* h^i = h^{i-1} + act(...) */
   real *Wt;         /* (K, C, H): Wt[(j C + c) H + h] = W[h, c, j], rows of outputs for vecmat */
   real *Wn;         /* (K, H, C): Wn[(j H + h) C + c] = W[h, c, j], its transpose per tap */
   const real *b;    /* (H) */
@@ -49,15 +59,22 @@ static void free_layers(layer_t *layers, int L) {
   free(layers);
 }
 
+/* Where torch keeps W_i[j][h, c]: the TCN's (H, C, K), the MLP's (H, K C). */
+static inline long weight_index(const shape_t *s, const layer_t *ly, int h, int c, int j) {
+  return s->kind == TCN ? ((long)h * ly->C + c) * ly->K + j : ((long)h * ly->K + j) * ly->C + c;
+}
+
 static layer_t *make_layers(const shape_t *s, const real **params, int with_grads) {
   layer_t *layers = calloc((size_t)s->L, sizeof(layer_t));
   if (!layers) return NULL;
-  const int H = s->H, K = s->K;
+  const int H = s->H;
   for (int i = 0; i < s->L; ++i) {
     layer_t *ly = layers + i;
-    const int C = i ? H : s->n_y + s->n_u;
-    const real *W = params[2 * i];
+    const int C = i ? H : s->n_y + s->n_u, K = (s->kind == TCN || i == 0) ? s->K : 1;
     ly->C = C;
+    ly->K = K;
+    ly->d = s->kind == TCN ? 1 << i : 1;
+    ly->residual = s->kind == TCN && i > 0;
     ly->b = params[2 * i + 1];
     ly->Wt = malloc(sizeof(real) * K * C * H);
     ly->Wn = malloc(sizeof(real) * K * C * H);
@@ -69,7 +86,7 @@ static layer_t *make_layers(const shape_t *s, const real **params, int with_grad
     for (int h = 0; h < H; ++h)
       for (int c = 0; c < C; ++c)
         for (int j = 0; j < K; ++j) {
-          const real w = W[((long)h * C + c) * K + j];
+          const real w = params[2 * i][weight_index(s, ly, h, c, j)];
           ly->Wt[((long)j * C + c) * H + h] = w;
           ly->Wn[((long)j * H + h) * C + c] = w;
         }
@@ -104,9 +121,9 @@ static void act_grad(int act, int n, const real *kept, const real *g, real *rest
   }
 }
 
-/* The step whose value tap j of layer i reads at step k: k - (K-1-j) 2^i, the rest (step 0) before 0. */
-static inline long tap_step(const shape_t *s, int i, int j, int k) {
-  const long t = (long)k - (long)(s->K - 1 - j) * (1L << i);
+/* The step whose value tap j of a layer reads at step k: k - (K-1-j) d, the rest (step 0) before 0. */
+static inline long tap_step(const layer_t *ly, int j, int k) {
+  const long t = (long)k - (long)(ly->K - 1 - j) * ly->d;
   return t > 0 ? t : 0;
 }
 
@@ -114,14 +131,17 @@ static inline long tap_step(const shape_t *s, int i, int j, int k) {
  * with hs == NULL (inference) a ring of the receptive field's steps is kept instead and kept, ns are unused.
  * n_z > 0: the linear path (lin, z0 (B, n_z)); n_z = 0: lin, z0 and ns are unused. Returns 0, or -1 when
  * memory runs out. */
-int nnfmu_tcn_forward(int B, int T, int n_u, int n_y, int H, int L, int K, int act, int has_skip, double skip,
-                      const real **params, const real *un, const real *yn0, real *ys, real *hs, real *kept,
-                      int n_z, const real **lin, const real *z0, real *ns) {
-  const shape_t s = {B, T, n_u, n_y, H, L, K, act, has_skip, (real)skip};
-  const long LBH = (long)L * B * H, R = hs ? 0 : (long)(K - 1) * (1L << (L - 1)) + 1;  /* R: ring length */
+int nnfmu_window_forward(int kind, int B, int T, int n_u, int n_y, int H, int L, int K, int act, int has_skip,
+                         double skip, const real **params, const real *un, const real *yn0, real *ys, real *hs,
+                         real *kept, int n_z, const real **lin, const real *z0, real *ns) {
+  const shape_t s = {kind, B, T, n_u, n_y, H, L, K, act, has_skip, (real)skip};
+  const long LBH = (long)L * B * H;
   const int C0 = n_y + n_u;
   const real *Wo = params[2 * L], *bo = params[2 * L + 1];
   layer_t *layers = make_layers(&s, params, 0);
+  long R = 1;  /* the ring's length: one more than the longest reach back of a tap */
+  for (int i = 0; layers && i < L; ++i)
+    if ((long)(layers[i].K - 1) * layers[i].d + 1 > R) R = (long)(layers[i].K - 1) * layers[i].d + 1;
   real *ring = hs ? NULL : malloc(sizeof(real) * R * LBH), *h_all = hs ? hs : ring;
   real *a = malloc(sizeof(real) * H), *x = malloc(sizeof(real) * C0), *n = malloc(sizeof(real) * n_y);
   real *zs = n_z ? malloc(sizeof(real) * 2 * B * n_z) : NULL;
@@ -135,8 +155,8 @@ int nnfmu_tcn_forward(int B, int T, int n_u, int n_y, int H, int L, int K, int a
       const real *in = NULL;
       for (int i = 0; i < L; ++i) {
         const layer_t *ly = layers + i;
-        for (int j = 0; j < K; ++j) {
-          const long t = tap_step(&s, i, j, k), at = hs ? t : t % R;
+        for (int j = 0; j < ly->K; ++j) {
+          const long t = tap_step(ly, j, k), at = hs ? t : t % R;
           if (i == 0) {
             memcpy(x, ys + (t * B + b) * n_y, sizeof(real) * n_y);
             memcpy(x + n_y, un + (t * B + b) * n_u, sizeof(real) * n_u);
@@ -149,7 +169,7 @@ int nnfmu_tcn_forward(int B, int T, int n_u, int n_y, int H, int L, int K, int a
         const long now = ((hs ? k : k % R) * L + i) * B * H + (long)b * H;
         real *h = h_all + now;
         activate(act, H, a, h, kept ? kept + now : NULL);
-        if (i) for (int c = 0; c < H; ++c) h[c] += h[c - (long)B * H];  /* h^{i-1}_k: the layer below, same step */
+        if (ly->residual) for (int c = 0; c < H; ++c) h[c] += h[c - (long)B * H];  /* h^{i-1}_k: the layer below */
         in = h;
       }
       for (int o = 0; o < n_y; ++o) n[o] = bo[o] + dot(H, Wo + (long)o * H, in);
@@ -174,11 +194,11 @@ int nnfmu_tcn_forward(int B, int T, int n_u, int n_y, int H, int L, int K, int a
  * whole batch, so that every gradient reaching a value has arrived before the value is processed (its later
  * taps and the layer above at the same step come first), and the weight gradients of a step are sums over the
  * batch (outer_sum). */
-int nnfmu_tcn_backward(int B, int T, int n_u, int n_y, int H, int L, int K, int act, int has_skip, double skip,
-                       const real **params, const real *un, const real *ys, const real *hs, const real *kept,
-                       const real *gys, real **grads, real *gyn0, int n_z, const real **lin, const real *ns,
-                       real *gz0) {
-  const shape_t s = {B, T, n_u, n_y, H, L, K, act, has_skip, (real)skip};
+int nnfmu_window_backward(int kind, int B, int T, int n_u, int n_y, int H, int L, int K, int act, int has_skip,
+                          double skip, const real **params, const real *un, const real *ys, const real *hs,
+                          const real *kept, const real *gys, real **grads, real *gyn0, int n_z, const real **lin,
+                          const real *ns, real *gz0) {
+  const shape_t s = {kind, B, T, n_u, n_y, H, L, K, act, has_skip, (real)skip};
   const long BH = (long)B * H, LBH = (long)L * BH, steps = T > 1 ? T - 1 : 0;
   const int C0 = n_y + n_u, C_max = C0 > H ? C0 : H;
   const real *Wo = params[2 * L];
@@ -216,11 +236,11 @@ int nnfmu_tcn_backward(int B, int T, int n_u, int n_y, int H, int L, int K, int 
       for (int b = 0; b < B; ++b) {
         const real *gh = gh_all + at + (long)b * H;
         act_grad(act, H, kept + at + (long)b * H, gh, ga + (long)b * H);
-        if (i) for (int c = 0; c < H; ++c) gh_all[at - BH + (long)b * H + c] += gh[c];  /* the residual */
+        if (ly->residual) for (int c = 0; c < H; ++c) gh_all[at - BH + (long)b * H + c] += gh[c];
         real *gb = grads[2 * i + 1];
         for (int c = 0; c < H; ++c) gb[c] += ga[(long)b * H + c];
-        for (int j = 0; j < K; ++j) {  /* dL/d(the tap's input) += W_j^T ga */
-          const long t = tap_step(&s, i, j, (int)k);
+        for (int j = 0; j < ly->K; ++j) {  /* dL/d(the tap's input) += W_j^T ga */
+          const long t = tap_step(ly, j, (int)k);
           const real *Wn = ly->Wn + (long)j * H * ly->C, *Wt = ly->Wt + (long)j * ly->C * H;
           if (i) {
             vecmat(H, H, ga + (long)b * H, Wn, Wt, NULL, 1, gh_all + (t * L + i - 1) * BH + (long)b * H);
@@ -230,8 +250,8 @@ int nnfmu_tcn_backward(int B, int T, int n_u, int n_y, int H, int L, int K, int 
           }
         }
       }
-      for (int j = 0; j < K; ++j) {  /* dL/dW_j += sum_b input_b^T ga_b */
-        const long t = tap_step(&s, i, j, (int)k);
+      for (int j = 0; j < ly->K; ++j) {  /* dL/dW_j += sum_b input_b^T ga_b */
+        const long t = tap_step(ly, j, (int)k);
         real *gW = ly->gWt + (long)j * ly->C * H;
         if (i) {
           outer_sum(B, H, H, hs + (t * L + i - 1) * BH, H, ga, H, gW);
@@ -249,7 +269,8 @@ int nnfmu_tcn_backward(int B, int T, int n_u, int n_y, int H, int L, int K, int 
       const layer_t *ly = layers + i;
       for (int h = 0; h < H; ++h)
         for (int c = 0; c < ly->C; ++c)
-          for (int j = 0; j < K; ++j) grads[2 * i][((long)h * ly->C + c) * K + j] += ly->gWt[((long)j * ly->C + c) * H + h];
+          for (int j = 0; j < ly->K; ++j)
+            grads[2 * i][weight_index(&s, ly, h, c, j)] += ly->gWt[((long)j * ly->C + c) * H + h];
     }
   }
   free_layers(layers, L); free(gy_all); free(gh_all); free(ga); free(gin); free(gn); free(carry_z); free(gz);

@@ -1,7 +1,7 @@
-"""The compiled free run of the TCN (nnfmu/training/tcn_rollout.c) computes what torch's loop over the TCN's step
-computes: outputs and the gradients of every weight and of ``yn0``, in float64, for every activation, depths and
-kernels, widths around the C vector blocks, with and without a linear path; and a training with it equals one in
-torch."""
+"""The compiled free run of the window networks (nnfmu/training/window_rollout.c: the TCN and the MLP) computes what
+torch's loop over their step computes: outputs and the gradients of every weight and of ``yn0``, in float64, for
+every activation, depths, kernels and windows, widths around the C vector blocks, with and without a linear path;
+and a training with it equals one in torch."""
 
 from __future__ import annotations
 
@@ -15,9 +15,11 @@ from tests.test_linear_path import data, linear, path_model  # noqa: F401 (modul
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
-CASES = [  # activation, layers, kernel, hidden, skip
-    ("tanh", 3, 3, 8, True), ("tanh", 1, 5, 21, False), ("relu", 2, 2, 16, True), ("sigmoid", 3, 2, 7, True),
-    ("elu", 2, 3, 33, False), ("silu", 4, 2, 9, True),
+CASES = [  # arch, activation, layers, kernel (TCN) or window (MLP), hidden, skip
+    ("tcn", "tanh", 3, 3, 8, True), ("tcn", "tanh", 1, 5, 21, False), ("tcn", "relu", 2, 2, 16, True),
+    ("tcn", "sigmoid", 3, 2, 7, True), ("tcn", "elu", 2, 3, 33, False), ("tcn", "silu", 4, 2, 9, True),
+    ("mlp", "tanh", 2, 10, 16, True), ("mlp", "relu", 1, 3, 21, False), ("mlp", "silu", 3, 1, 8, True),
+    ("mlp", "elu", 2, 4, 33, True), ("mlp", "sigmoid", 2, 6, 7, False),
 ]
 
 
@@ -26,10 +28,11 @@ def close(got, wanted, rel=1e-12) -> bool:
     return got.shape == wanted.shape and float((got - wanted).detach().abs().max()) <= rel * scale
 
 
-def tcn(activation, layers, kernel, hidden, skip):
-    torch.manual_seed(layers * 10 + kernel)
-    config = ModelConfig(arch="tcn", n_u=3, n_y=2, hidden=hidden, layers=layers, kernel_size=kernel,
-                         activation=activation, skip=skip)
+def network(arch, activation, layers, taps, hidden, skip):
+    torch.manual_seed(layers * 10 + taps)
+    sizes = {"kernel_size": taps} if arch == "tcn" else {"window": taps}
+    config = ModelConfig(arch=arch, n_u=3, n_y=2, hidden=hidden, layers=layers, activation=activation, skip=skip,
+                         **sizes)
     model = build_model(config).double()
     with torch.no_grad():  # weights large enough that every layer's activation is far from linear
         for p in model.parameters():
@@ -56,26 +59,27 @@ def agree(model, n_u, n_y, batch=4, steps=50):
         assert close(a, b), name
 
 
-@pytest.mark.parametrize("activation, layers, kernel, hidden, skip", CASES)
-def test_compiled_tcn_free_run_and_its_gradients_equal_torch_in_float64(activation, layers, kernel, hidden, skip):
-    agree(tcn(activation, layers, kernel, hidden, skip), n_u=3, n_y=2)
+@pytest.mark.parametrize("arch, activation, layers, taps, hidden, skip", CASES)
+def test_compiled_free_run_and_its_gradients_equal_torch_in_float64(arch, activation, layers, taps, hidden, skip):
+    agree(network(arch, activation, layers, taps, hidden, skip), n_u=3, n_y=2)
 
 
-@pytest.mark.parametrize("activation", ["tanh", "silu"])
-def test_on_a_linear_path_too(activation, data, linear):
-    model = path_model("tcn", data, linear, activation=activation)
+@pytest.mark.parametrize("arch, activation", [("tcn", "tanh"), ("tcn", "silu"), ("mlp", "tanh")])
+def test_on_a_linear_path_too(arch, activation, data, linear):
+    model = path_model(arch, data, linear, activation=activation)
     g = torch.Generator().manual_seed(3)
-    with torch.no_grad():  # a correction that is not zero: G, alpha and the head all reach the output
+    with torch.no_grad():  # a correction that is not zero: G, alpha and the output layer all reach the output
         model.alpha.copy_(0.5 * torch.randn(model.alpha.shape, generator=g, dtype=torch.float64))
         model.lin_G.copy_(0.3 * torch.randn(model.lin_G.shape, generator=g, dtype=torch.float64))
-        model.net.head.weight.mul_(3.0)
+        (model.net.head if arch == "tcn" else model.net.net[-1]).weight.mul_(3.0)
     agree(model, data.n_u, data.n_y)
 
 
-def test_inference_keeps_a_ring_of_the_receptive_field_and_float32_agrees():
-    model = tcn("tanh", 3, 3, 16, True).eval()
+@pytest.mark.parametrize("arch", ["tcn", "mlp"])
+def test_inference_keeps_a_ring_of_the_receptive_field_and_float32_agrees(arch):
+    model = network(arch, "tanh", 3, 3, 16, True).eval()
     g = torch.Generator().manual_seed(2)
-    un = torch.randn(2, 300, 3, generator=g, dtype=torch.float64)  # 300 steps: the ring of 15 wraps many times
+    un = torch.randn(2, 300, 3, generator=g, dtype=torch.float64)  # 300 steps: the ring (TCN: 9) wraps many times
     yn0 = torch.randn(2, 2, generator=g, dtype=torch.float64)
     with torch.no_grad():
         wanted = model.rollout_normalised(un, yn0)
@@ -85,20 +89,22 @@ def test_inference_keeps_a_ring_of_the_receptive_field_and_float32_agrees():
     assert close(got.double(), wanted, rel=1e-4)
 
 
-def test_the_compiled_tcn_applies_only_where_it_computes_the_same(data, linear):
-    base = dict(arch="tcn", n_u=2, n_y=1, hidden=8, layers=2)
+@pytest.mark.parametrize("arch", ["tcn", "mlp"])
+def test_the_compiled_path_applies_only_where_it_computes_the_same(arch, data, linear):
+    base = dict(arch=arch, n_u=2, n_y=1, hidden=8, layers=2)
     assert cr.compiled_rollout(build_model(ModelConfig(**base))) is not None
     assert cr.compiled_rollout(build_model(ModelConfig(**base, increment=True))) is None  # relative taps: torch's
     assert cr.compiled_rollout(build_model(ModelConfig(**base, init_window=4))) is None
     dropout = build_model(ModelConfig(**base, dropout=0.2))
     assert cr.compiled_rollout(dropout.train()) is None and cr.compiled_rollout(dropout.eval()) is not None
-    noisy = path_model("tcn", data, linear).train()
+    noisy = path_model(arch, data, linear).train()
     noisy.feedback_noise = 0.1
     assert cr.compiled_rollout(noisy) is None and cr.compiled_rollout(noisy.eval()) is not None
 
 
-def test_a_tcn_training_with_the_compiled_free_run_equals_one_in_torch(data, linear, monkeypatch):
-    config = ModelConfig(arch="tcn", n_u=data.n_u, n_y=data.n_y, hidden=8, layers=2, linear_order=linear.n_x)
+@pytest.mark.parametrize("arch", ["tcn", "mlp"])
+def test_a_training_with_the_compiled_free_run_equals_one_in_torch(arch, data, linear, monkeypatch):
+    config = ModelConfig(arch=arch, n_u=data.n_u, n_y=data.n_y, hidden=8, layers=2, linear_order=linear.n_x)
     options = TrainConfig(epochs=2, batch_size=2, truncate=40, dtype="float64", patience=0)
     fast = train(data, config, options, linear=linear)
     monkeypatch.setenv(cr.ENV_SWITCH, "0")
