@@ -1,6 +1,7 @@
 """The compiled free run (nnfmu/training/rollout.c) of a recurrent network on a linear path computes what torch's
 generic loop over ``LinearPathStepModel._step_norm`` computes: outputs and the gradients of every parameter and
-of ``yn0`` (through the network, the path and ``z0``), in float64, for every cell and depth."""
+of ``yn0`` (through the network, the path and ``z0``), in float64, for every cell and depth; and a training on the
+path with the compiled free run (recurrent, TCN and MLP: window_rollout.c) equals one in torch."""
 
 from __future__ import annotations
 
@@ -75,8 +76,9 @@ def test_the_compiled_path_on_a_linear_path_applies_only_where_it_computes_the_s
     assert cr.compiled_rollout(noisy) is None
 
 
-def test_a_training_on_a_linear_path_with_the_compiled_free_run_equals_one_in_torch(data, linear, monkeypatch):
-    config = ModelConfig(arch="gru", n_u=2, n_y=2, hidden=8, linear_order=linear.n_x)
+@pytest.mark.parametrize("arch", ["gru", "tcn", "mlp"])
+def test_a_training_on_a_linear_path_with_the_compiled_free_run_equals_one_in_torch(arch, data, linear, monkeypatch):
+    config = ModelConfig(arch=arch, n_u=2, n_y=2, hidden=8, linear_order=linear.n_x)
     options = TrainConfig(epochs=2, batch_size=2, truncate=40, dtype="float64", patience=0)
     assert cr.compiled_rollout(build_model(config).double()) is not None
     fast = train(data, config, options, linear=linear)
@@ -86,3 +88,4 @@ def test_a_training_on_a_linear_path_with_the_compiled_free_run_equals_one_in_to
     for a, b in zip(fast.history[1:], plain.history[1:]):
         assert a["train_loss"] == pytest.approx(b["train_loss"], rel=1e-9)
         assert a["valid_nrmse"] == pytest.approx(b["valid_nrmse"], rel=1e-9)
+    assert fast.history[2]["train_loss"] != fast.history[1]["train_loss"]  # it trained

@@ -1,7 +1,7 @@
 """The compiled free run of the window networks (nnfmu/training/window_rollout.c: the TCN and the MLP) computes what
 torch's loop over their step computes: outputs and the gradients of every weight and of ``yn0``, in float64, for
-every activation, depths, kernels and windows, widths around the C vector blocks, with and without a linear path;
-and a training with it equals one in torch."""
+every activation, depths, kernels and windows, widths around the C vector blocks, with and without a linear path.
+A training with it equals one in torch: tests/test_compiled_linear_path.py."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from nnfmu.models import ModelConfig, build_model
-from nnfmu.training import TrainConfig, train
 from nnfmu.training import compiled_rollout as cr
 from tests.test_linear_path import data, linear, path_model  # noqa: F401 (module fixtures)
 
@@ -100,17 +99,3 @@ def test_the_compiled_path_applies_only_where_it_computes_the_same(arch, data, l
     noisy = path_model(arch, data, linear).train()
     noisy.feedback_noise = 0.1
     assert cr.compiled_rollout(noisy) is None and cr.compiled_rollout(noisy.eval()) is not None
-
-
-@pytest.mark.parametrize("arch", ["tcn", "mlp"])
-def test_a_training_with_the_compiled_free_run_equals_one_in_torch(arch, data, linear, monkeypatch):
-    config = ModelConfig(arch=arch, n_u=data.n_u, n_y=data.n_y, hidden=8, layers=2, linear_order=linear.n_x)
-    options = TrainConfig(epochs=2, batch_size=2, truncate=40, dtype="float64", patience=0)
-    fast = train(data, config, options, linear=linear)
-    monkeypatch.setenv(cr.ENV_SWITCH, "0")
-    plain = train(data, config, options, linear=linear)
-    assert len(fast.history) == len(plain.history) == 3
-    for a, b in zip(fast.history[1:], plain.history[1:]):
-        assert a["train_loss"] == pytest.approx(b["train_loss"], rel=1e-9)
-        assert a["valid_nrmse"] == pytest.approx(b["valid_nrmse"], rel=1e-9)
-    assert fast.history[-1]["train_loss"] != fast.history[1]["train_loss"]  # it trained
