@@ -97,5 +97,35 @@ def test_the_compiled_path_applies_only_where_it_computes_the_same(arch, data, l
     dropout = build_model(ModelConfig(**base, dropout=0.2))
     assert cr.compiled_rollout(dropout.train()) is None and cr.compiled_rollout(dropout.eval()) is not None
     noisy = path_model(arch, data, linear).train()
-    noisy.feedback_noise = 0.1
-    assert cr.compiled_rollout(noisy) is None and cr.compiled_rollout(noisy.eval()) is not None
+    noisy.feedback_noise = 0.1  # unlike the recurrent cells' C code, this one adds the noise (test below)
+    assert cr.compiled_rollout(noisy) is not None
+
+
+@pytest.mark.parametrize("arch, on_path", [("tcn", False), ("tcn", True), ("mlp", False), ("mlp", True)])
+def test_with_feedback_noise_the_compiled_free_run_draws_and_adds_what_torch_does(arch, on_path, data, linear):
+    """In training with feedback noise the fed-back output is disturbed and the rest state is not: the C code
+    gets torch's own draws, so values and gradients equal torch's loop for the same seed."""
+    if on_path:
+        model = path_model(arch, data, linear).train()
+        with torch.no_grad():
+            model.alpha.fill_(0.4)
+            model.lin_G.fill_(0.2)
+    else:
+        model = network(arch, "tanh", 2, 3, 8, True).train()
+    model.feedback_noise = 0.3
+    n_u, n_y = model.config.n_u, model.config.n_y
+    g = torch.Generator().manual_seed(4)
+    un = torch.randn(3, 40, n_u, generator=g, dtype=torch.float64)
+    yn0 = torch.randn(3, n_y, generator=g, dtype=torch.float64, requires_grad=True)
+    weight = torch.randn(3, 40, n_y, generator=g, dtype=torch.float64)
+    torch.manual_seed(7)
+    wanted = model.rollout_normalised(un, yn0)
+    torch.manual_seed(7)
+    got = cr.compiled_rollout(model)(un, yn0)
+    torch.manual_seed(8)
+    other = cr.compiled_rollout(model)(un, yn0)
+    assert close(got, wanted) and not close(other, wanted, rel=1e-3)  # the noise is there, and it is torch's
+    inputs = [yn0, *model.parameters()]
+    for a, b in zip(torch.autograd.grad((got * weight).sum(), inputs), torch.autograd.grad((wanted * weight).sum(),
+                                                                                             inputs)):
+        assert close(a, b)

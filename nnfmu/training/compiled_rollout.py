@@ -20,8 +20,8 @@ It applies to a model whose architecture's record names the compiled cell that c
 :class:`~nnfmu.models.mlp.MLPStepModel`), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
-the CPU in float32 or float64, with no active dropout or feedback noise (eval mode, or both zero),
-no init window and no increment mode. The library is compiled at first use with
+the CPU in float32 or float64, with no active dropout (eval mode, or zero) or, for the recurrent cells, feedback
+noise, no init window and no increment mode. The library is compiled at first use with
 the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
 like the compiled physics (``$NNFMU_CACHE_DIR``; :mod:`nnfmu.training.rollout_library`). Without a compiler, or if
 compiling fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
@@ -56,7 +56,8 @@ def compiled_rollout(model: StepModel):
     Applies to a model whose record names a ``rollout_cell`` (module docstring), or a
     :class:`LinearPathStepModel` on one, whose weights
     (and buffers of the path) are CPU float32/float64 tensors, without an init window or increment mode,
-    and whose dropout and feedback noise are inactive (eval mode, or zero); None otherwise, and None with a
+    and whose dropout is inactive (eval mode, or zero), as is the feedback noise of a recurrent one; None otherwise,
+    and None with a
     one-time RuntimeWarning when the library cannot be compiled.
     """
     if not _applies(model):
@@ -110,7 +111,8 @@ def _applies(model: StepModel) -> bool:
     tensors = [*model.parameters(), *(getattr(model, name) for name in FIXED if net is not model)]
     if dtype not in REALS or any(t.device.type != "cpu" or t.dtype != dtype for t in tensors):
         return False
-    return not (model.training and (net.config.dropout > 0 or model.feedback_noise))
+    noise_in_c = record.rollout_cell in compiled_window.KINDS  # window_rollout.c adds torch's draws itself
+    return not (model.training and (net.config.dropout > 0 or (model.feedback_noise and not noise_in_c)))
 
 
 def _cell(model: StepModel) -> int:

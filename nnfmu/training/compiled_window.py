@@ -2,8 +2,8 @@
 
 Same contract as the recurrent networks' (``rollout(un, yn0) -> ys``, back-propagated by torch's autograd): a
 :class:`~nnfmu.models.tcn.TCNStepModel` or :class:`~nnfmu.models.mlp.MLPStepModel`, or a
-:class:`~nnfmu.models.linear_path.LinearPathStepModel` on one, in eval mode or with no active dropout or feedback
-noise, without an init window or increment mode (the conditions
+:class:`~nnfmu.models.linear_path.LinearPathStepModel` on one, in eval mode or with no active dropout, with or
+without feedback noise (drawn as torch's loop draws it), without an init window or increment mode (the conditions
 :func:`nnfmu.training.compiled_rollout.compiled_rollout` checks). In torch a step of the TCN is a few dozen small
 operations, 2 ms forward and backward at batch 9 on one thread, and the MLP's about 0.9 ms: the slowest free runs
 of the five networks (docs/accuracy.md). Values and gradients equal torch's to rounding (tested in float64).
@@ -26,11 +26,13 @@ KINDS = {"tcn": 0, "mlp": 1}
 def apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
     """The free run of ``model`` (a TCN or MLP, or a linear path on one): (B, T, n_u), (B, n_y) -> (B, T, n_y),
     normalised."""
+    noise = model.feedback_noise if model.training else 0.0  # the path's noise, which its network's loop would add
     if type(model) is not LinearPathStepModel:
-        return _WindowRollout.apply(model, None, library, un, yn0, None, *_weights(model))
+        return _WindowRollout.apply(model, None, library, noise, un, yn0, None, *_weights(model))
     fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
     z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
-    return _WindowRollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
+    return _WindowRollout.apply(model.net, fixed, library, noise, un, yn0, z0, *_weights(model.net), model.lin_G,
+                                model.alpha)
 
 
 def _weights(model: StepModel) -> list[torch.Tensor]:
@@ -52,44 +54,53 @@ def _header(model: StepModel, B: int, T: int) -> tuple:
 class _WindowRollout(torch.autograd.Function):
     """Forward: ``nnfmu_window_forward``. Backward: ``nnfmu_window_backward``. Time-major inside.
 
-    ``model``: the TCN or MLP; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z) its initial state,
-    and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None.
+    ``model``: the TCN or MLP; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z) its initial
+    state, and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None. ``noise``: the std of the
+    feedback noise (0: none), drawn here as the torch loop draws it (one ``randn_like`` of (B, n_y) a step, in order).
     """
 
     @staticmethod
-    def forward(ctx, model, fixed, library, un, yn0, z0, *weights):
+    def forward(ctx, model, fixed, library, noise_std, un, yn0, z0, *weights):
         B, T, _ = un.shape
         c, dtype = model.config, weights[0].dtype
         weights = [w.detach().contiguous() for w in weights]
         un_t = un.detach().to(dtype).transpose(0, 1).contiguous()
         yn0 = yn0.detach().to(dtype).contiguous()
         z0 = None if z0 is None else z0.detach().to(dtype).contiguous()
+        noise = fed = None
+        if noise_std:
+            draws = [noise_std * torch.randn_like(yn0) for _ in range(T - 1)]
+            noise = torch.stack(draws) if draws else yn0.new_empty(0, B, c.n_y)
+            fed = torch.empty_like(noise)
         ys_t = un_t.new_empty(T, B, c.n_y)
-        keep = any(ctx.needs_input_grad[3:])
+        keep = any(ctx.needs_input_grad[4:])
         shape = (max(T - 1, 0), c.layers, B, c.hidden)
         hs = un_t.new_empty(shape) if keep else None
         kept = un_t.new_empty(shape) if keep else None
+        rest, rest_kept = un_t.new_empty(c.layers, B, c.hidden), un_t.new_empty(c.layers, B, c.hidden)
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None
-        status = library.nnfmu_window_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0), ptr(ys_t),
-                                           ptr(hs), ptr(kept), *path_arguments(fixed), ptr(z0), ptr(ns))
+        status = library.nnfmu_window_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0),
+                                              ptr(noise), ptr(ys_t), ptr(fed), ptr(hs), ptr(kept), ptr(rest),
+                                              ptr(rest_kept), *path_arguments(fixed), ptr(z0), ptr(ns))
         check(status, "free run", B, T)
         if keep:
             ctx.model, ctx.library, ctx.fixed = model, library, fixed
-            ctx.save_for_backward(un_t, ys_t, hs, kept, ns, *weights)
+            ctx.save_for_backward(un_t, ys_t, fed, hs, kept, rest, rest_kept, ns, *weights)
         return ys_t.transpose(0, 1).to(un.dtype)
 
     @staticmethod
     def backward(ctx, gys):
-        un_t, ys_t, hs, kept, ns, *weights = ctx.saved_tensors
+        un_t, ys_t, fed, hs, kept, rest, rest_kept, ns, *weights = ctx.saved_tensors
         T, B, _ = un_t.shape
         grads = [torch.zeros_like(w) for w in weights]
         gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
         gyn0 = gys_t.new_empty(gys_t.shape[1:])
         gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
-        status = ctx.library.nnfmu_window_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t), ptr(ys_t),
-                                                ptr(hs), ptr(kept), ptr(gys_t), pointers(grads), ptr(gyn0),
-                                                *path_arguments(ctx.fixed), ptr(ns), ptr(gz0))
+        status = ctx.library.nnfmu_window_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t),
+                                                   ptr(ys_t), ptr(fed), ptr(hs), ptr(kept), ptr(rest),
+                                                   ptr(rest_kept), ptr(gys_t), pointers(grads), ptr(gyn0),
+                                                   *path_arguments(ctx.fixed), ptr(ns), ptr(gz0))
         check(status, "back-propagation through the free run", B, T)
         needed = ctx.needs_input_grad
-        return (None, None, None, None, gyn0 if needed[4] else None, gz0 if needed[5] else None,
-                *(g if need else None for g, need in zip(grads, needed[6:])))
+        return (None, None, None, None, None, gyn0 if needed[5] else None, gz0 if needed[6] else None,
+                *(g if need else None for g, need in zip(grads, needed[7:])))

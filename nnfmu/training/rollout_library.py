@@ -73,8 +73,8 @@ def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
     path = [ctypes.c_int] + [ctypes.c_void_p] * 3
     if stem == "window_rollout":
         header = [ctypes.c_int] * 10 + [ctypes.c_double]
-        lib.nnfmu_window_forward.argtypes = header + [ctypes.c_void_p] * 6 + path
-        lib.nnfmu_window_backward.argtypes = header + [ctypes.c_void_p] * 8 + path
+        lib.nnfmu_window_forward.argtypes = header + [ctypes.c_void_p] * 10 + path
+        lib.nnfmu_window_backward.argtypes = header + [ctypes.c_void_p] * 11 + path
         entries = (lib.nnfmu_window_forward, lib.nnfmu_window_backward)
     else:
         header = [ctypes.c_int] * 8 + [ctypes.c_double]
