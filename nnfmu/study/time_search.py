@@ -11,7 +11,8 @@ period: :data:`GRACE_STEPS` optimiser steps, at least 3 epochs). The whole searc
   kept for the last epochs to finish, Ray's shutdown and the copy of the best;
 - ``clamp(cpus * time left / TRIAL_MINUTES, cpus, MAX_TRIALS)`` trials are planned, each capped at
   ``CAP_SHARE x`` its fair share of the time (ASHA ends most of them early), and never past the end;
-  a core whose trial ended takes the next point;
+  a core whose trial ended takes the next point, of up to :data:`MAX_POINTS`, so that the budget is spent
+  when ASHA ends the trials faster than planned;
 - no trial starts once less than a quarter of a cap (or :data:`MIN_TRIAL_S`) is left; a trial stops after
   an epoch when the next would end past the end; Tune's own time budget stops whatever still runs then.
 
@@ -45,7 +46,8 @@ END_RESERVE = 0.05  # of the budget, at least MIN_RESERVE_S
 MIN_RESERVE_S = 5.0
 TRIAL_MINUTES = 0.5  # planned CPU-minutes per trial
 CAP_SHARE = 2.5
-MAX_TRIALS = 24
+MAX_TRIALS = 24  # planned: what sets each trial's cap
+MAX_POINTS = 4 * MAX_TRIALS  # run while time is left (the robot's 24 planned trials ended in 435 of its 600 s)
 MIN_TRIAL_S = 5.0
 GRACE_STEPS = 20
 THREAD_TIMEOUT_S = 60
@@ -114,7 +116,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
         planned = min(MAX_TRIALS, max(cpus, cpus * left / (60.0 * TRIAL_MINUTES)))
         cap = max(MIN_TRIAL_S, min(left, CAP_SHARE * cpus * left / planned))
         # more points than planned: a core whose trial ended early takes the next, while time is left
-        points = trial_points(model_config, train_config, given, MAX_TRIALS, seed,
+        points = trial_points(model_config, train_config, given, MAX_POINTS, seed,
                               int(trials_ds.train.lengths.max()))
         wall_end = time.time() + (end - time.monotonic())
         job = {"points": points, "model_config": model_config.to_dict(), "train_config": train_config.to_dict(),
