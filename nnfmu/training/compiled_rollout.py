@@ -41,7 +41,8 @@ from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
 from nnfmu.training import compiled_window
-from nnfmu.training.rollout_library import FIXED, REALS, check, library_or_none, path_arguments, pointers, ptr
+from nnfmu.training.rollout_library import (FIXED, REALS, backward_buffers, check, library_or_none,
+                                            path_arguments, pointers, ptr)
 from nnfmu.training.rollout_library import library as _library  # noqa: F401 (tests build it directly)
 
 _library_or_none = library_or_none  # tests clear its cache
@@ -175,10 +176,7 @@ class _Rollout(torch.autograd.Function):
     def backward(ctx, gys):
         un_t, ys_t, hs, cs, saved, ns, *weights = ctx.saved_tensors
         T, B, _ = un_t.shape
-        grads = [torch.zeros_like(w) for w in weights]
-        gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
-        gyn0 = gys_t.new_empty(gys_t.shape[1:])
-        gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
+        grads, gys_t, gyn0, gz0 = backward_buffers(weights, gys, ctx.fixed)
         status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t),
                                                     ptr(ys_t), ptr(hs), ptr(cs), ptr(saved), ptr(gys_t),
                                                     pointers(grads), ptr(gyn0), *path_arguments(ctx.fixed), ptr(ns),

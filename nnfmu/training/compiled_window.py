@@ -1,4 +1,4 @@
-"""The window networks' free run (TCN, MLP) as compiled C (``window_rollout.c``), for :mod:`~nnfmu.training.compiled_rollout`.
+"""The window networks' free run (TCN, MLP) as compiled C (``window_rollout.c``), for ``compiled_rollout``.
 
 Same contract as the recurrent networks' (``rollout(un, yn0) -> ys``, back-propagated by torch's autograd): a
 :class:`~nnfmu.models.tcn.TCNStepModel` or :class:`~nnfmu.models.mlp.MLPStepModel`, or a
@@ -17,7 +17,7 @@ import torch
 
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.training.rollout_library import FIXED, check, path_arguments, pointers, ptr
+from nnfmu.training.rollout_library import FIXED, backward_buffers, check, path_arguments, pointers, ptr
 
 ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # window_rollout.c's codes
 KINDS = {"tcn": 0, "mlp": 1}
@@ -92,10 +92,7 @@ class _WindowRollout(torch.autograd.Function):
     def backward(ctx, gys):
         un_t, ys_t, fed, hs, kept, rest, rest_kept, ns, *weights = ctx.saved_tensors
         T, B, _ = un_t.shape
-        grads = [torch.zeros_like(w) for w in weights]
-        gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
-        gyn0 = gys_t.new_empty(gys_t.shape[1:])
-        gz0 = None if ctx.fixed is None else gys_t.new_empty(B, ctx.fixed[0].shape[0])
+        grads, gys_t, gyn0, gz0 = backward_buffers(weights, gys, ctx.fixed)
         status = ctx.library.nnfmu_window_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t),
                                                    ptr(ys_t), ptr(fed), ptr(hs), ptr(kept), ptr(rest),
                                                    ptr(rest_kept), ptr(gys_t), pointers(grads), ptr(gyn0),

@@ -35,6 +35,16 @@ def ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
     return ctypes.c_void_p(None if t is None else t.data_ptr())
 
 
+def backward_buffers(weights, gys: torch.Tensor, fixed) -> tuple:
+    """What a backward call fills: the weights' gradients (zeroed), ``dL/dys`` time-major (T, B, n_y) in the weights'
+    dtype, and the outputs ``dL/dyn0`` (B, n_y) and ``dL/dz0`` (B, n_z; None without a linear path)."""
+    grads = [torch.zeros_like(w) for w in weights]
+    gys_t = gys.to(weights[0].dtype).transpose(0, 1).contiguous()
+    gyn0 = gys_t.new_empty(gys_t.shape[1:])
+    gz0 = None if fixed is None else gys_t.new_empty(gys_t.shape[1], fixed[0].shape[0])
+    return grads, gys_t, gyn0, gz0
+
+
 def check(status: int, what: str, B: int, T: int) -> None:
     """SimulationError when a C call says its memory ran out (status != 0)."""
     if status != 0:
@@ -60,8 +70,9 @@ def source(stem: str) -> str:
 
 
 def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
-    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``window_rollout``: the TCN and the MLP) for ``dtype`` once per
-    machine (cached by source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``) and load it."""
+    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``window_rollout``: the TCN and the MLP) for
+    ``dtype`` once per machine (cached by source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``)
+    and load it."""
     from nnfmu import cbuild
 
     flags = (*_FLAGS, f"-DNNFMU_REAL={REALS[dtype]}")

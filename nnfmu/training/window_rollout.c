@@ -180,7 +180,7 @@ int nnfmu_window_forward(int kind, int B, int T, int n_u, int n_y, int H, int L,
   for (long k = 0; ok && k + 1 < T; ++k) {
     for (int b = 0; b < B; ++b) {
       if (noise)
-        for (int o = 0; o < n_y; ++o) fed[(k * B + b) * n_y + o] = ys[(k * B + b) * n_y + o] + noise[(k * B + b) * n_y + o];
+        for (long o = (k * B + b) * n_y; o < (k * B + b + 1) * n_y; ++o) fed[o] = ys[o] + noise[o];
       const real *top = NULL;
       for (int i = 0; i < L; ++i) {
         const layer_t *ly = layers + i;
@@ -189,7 +189,7 @@ int nnfmu_window_forward(int kind, int B, int T, int n_u, int n_y, int H, int L,
           if (i == 0)
             in[j] = sample(&s, t, b, feed, ys, un, x + (long)j * (n_y + n_u));
           else
-            in[j] = t < 0 ? rest + ((long)(i - 1) * B + b) * H : h_all + ((hs ? t : t % R) * L + i - 1) * BH + (long)b * H;
+            in[j] = (t < 0 ? rest + (long)(i - 1) * BH : h_all + ((hs ? t : t % R) * L + i - 1) * BH) + (long)b * H;
         }
         const long now = ((hs ? k : k % R) * L + i) * BH + (long)b * H;
         column(&s, ly, in, i ? h_all + now - BH : NULL, a, h_all + now, kept ? kept + now : NULL);
@@ -266,7 +266,8 @@ int nnfmu_window_backward(int kind, int B, int T, int n_u, int n_y, int H, int L
   real *g_rest = calloc((size_t)LBH, sizeof(real)), *g_rest_y = calloc((size_t)B * n_y, sizeof(real));
   real *ga = malloc(sizeof(real) * BH), *gin = malloc(sizeof(real) * C_max), *gn = malloc(sizeof(real) * B * n_y);
   real *carry_z = n_z ? calloc((size_t)B * n_z, sizeof(real)) : NULL, *gz = n_z ? malloc(sizeof(real) * n_z) : NULL;
-  real *dn = malloc(sizeof(real) * n_y), **gin_y = malloc(sizeof(real *) * K_max), **gin_h = malloc(sizeof(real *) * K_max);
+  real *dn = malloc(sizeof(real) * n_y);
+  real **gin_y = malloc(sizeof(real *) * K_max), **gin_h = malloc(sizeof(real *) * K_max);
   const real **in_y = malloc(sizeof(real *) * K_max), **in_u = malloc(sizeof(real *) * K_max);
   const real **in_h = malloc(sizeof(real *) * K_max);
   const int ok = layers && gy_all && gh_all && g_rest && g_rest_y && ga && gin && gn && dn && gin_y && gin_h &&
