@@ -55,8 +55,9 @@ class _WindowRollout(torch.autograd.Function):
     """Forward: ``nnfmu_window_forward``. Backward: ``nnfmu_window_backward``. Time-major inside.
 
     ``model``: the TCN or MLP; with a linear path, ``fixed`` = its ``[A, B, b, C, d]``, ``z0`` (B, n_z) its initial
-    state, and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None. ``noise``: the std of the
-    feedback noise (0: none), drawn here as the torch loop draws it (one ``randn_like`` of (B, n_y) a step, in order).
+    state, and ``weights`` end with ``G``, ``alpha``; else ``fixed`` and ``z0`` are None. ``noise_std``: the std of
+    the feedback noise (0: none), drawn here as the torch loop draws it (one ``randn_like`` of (B, n_y) a step, in
+    order).
     """
 
     @staticmethod
