@@ -73,7 +73,22 @@ def test_the_compiled_path_on_a_linear_path_applies_only_where_it_computes_the_s
     assert cr.compiled_rollout(dropout.train()) is None and cr.compiled_rollout(dropout.eval()) is not None
     noisy = path_model("gru", data, linear).train()
     noisy.feedback_noise = 0.1
-    assert cr.compiled_rollout(noisy) is None
+    assert cr.compiled_rollout(noisy) is not None  # torch's draws, added in C
+
+
+def test_feedback_noise_on_a_linear_path_is_torch_s_in_the_compiled_free_run(data, linear):
+    model = corrected(path_model("gru", data, linear, layers=2)).train()
+    model.feedback_noise = 0.3
+    un = torch.randn(3, 40, data.n_u, dtype=torch.float64)
+    yn0 = torch.randn(3, data.n_y, dtype=torch.float64, requires_grad=True)
+    torch.manual_seed(5)
+    wanted = model.rollout_normalised(un, yn0)
+    torch.manual_seed(5)
+    got = cr.compiled_rollout(model)(un, yn0)
+    assert close(got, wanted)
+    inputs = [yn0, *model.parameters()]
+    for a, b in zip(torch.autograd.grad(got.sum(), inputs), torch.autograd.grad(wanted.sum(), inputs)):
+        assert close(a, b)
 
 
 @pytest.mark.parametrize("arch", ["gru", "tcn", "mlp"])

@@ -53,15 +53,41 @@ def test_compiled_free_run_and_its_gradients_equal_torch_in_float64(arch, activa
         assert torch.allclose(a, b, rtol=0, atol=1e-12 * float(b.abs().max()))
 
 
-@pytest.mark.parametrize("option", ["increment", "init_window", "feedback_noise"])
+@pytest.mark.parametrize("arch", ["gru", "lstm", "rnn"])
+def test_with_feedback_noise_the_compiled_free_run_adds_torch_s_draws(arch):
+    """Noise on the fed-back output in training: the C code gets torch's own draws (one a step, in order), so
+    values and gradients equal torch's loop for the same seed, and another seed gives other numbers."""
+    model = _model(arch, "tanh", 2, 8, True).train()
+    model.feedback_noise = 0.3
+    g = torch.Generator().manual_seed(1)
+    un = torch.randn(4, 40, 3, generator=g, dtype=torch.float64)
+    yn0 = torch.randn(4, 2, generator=g, dtype=torch.float64, requires_grad=True)
+    weight = torch.randn(4, 40, 2, generator=g, dtype=torch.float64)
+    rollout = cr.compiled_rollout(model)
+    assert rollout is not None
+    torch.manual_seed(7)
+    wanted = model.rollout_normalised(un, yn0)
+    torch.manual_seed(7)
+    got = rollout(un, yn0)
+    torch.manual_seed(8)
+    other = rollout(un, yn0)
+    scale = float(wanted.detach().abs().max())
+    assert torch.allclose(got, wanted, rtol=0, atol=1e-12 * scale)
+    assert float((other - wanted).detach().abs().max()) > 1e-3 * scale  # the noise is there
+    inputs = [yn0, *model.parameters()]
+    for a, b in zip(torch.autograd.grad((got * weight).sum(), inputs), torch.autograd.grad((wanted * weight).sum(),
+                                                                                             inputs)):
+        assert torch.allclose(a, b, rtol=0, atol=1e-12 * float(b.abs().max()))
+
+
+@pytest.mark.parametrize("option", ["increment", "init_window"])
 def test_a_training_free_run_with_an_option_the_c_code_lacks_is_torch_s(option):
-    """The issue-11 options (increment readout, encoder initial state, noise on the fed-back output) are
-    computed by torch, not silently dropped by the compiled free run."""
+    """The issue-11 options (increment readout, encoder initial state) are computed by torch, not silently
+    dropped by the compiled free run."""
     torch.manual_seed(0)
     config = ModelConfig(arch="gru", n_u=3, n_y=2, hidden=8, skip=True, increment=option == "increment",
                          init_window=4 if option == "init_window" else 1)
     model = build_model(config).double().train()
-    model.feedback_noise = 0.3 if option == "feedback_noise" else 0.0
     g = torch.Generator().manual_seed(1)
     un, yn = torch.randn(5, 40, 3, generator=g, dtype=torch.float64), torch.randn(5, 40, 2, generator=g,
                                                                                  dtype=torch.float64)

@@ -20,8 +20,8 @@ It applies to a model whose architecture's record names the compiled cell that c
 :class:`~nnfmu.models.mlp.MLPStepModel`), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
-the CPU in float32 or float64, with no active dropout (eval mode, or zero) or, for the recurrent cells, feedback
-noise, no init window and no increment mode. The library is compiled at first use with
+the CPU in float32 or float64, with no active dropout (eval mode, or zero), no init window and no increment mode.
+Feedback noise in training is drawn by torch as its own loop draws it and added in C, so the numbers are the same. The library is compiled at first use with
 the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
 like the compiled physics (``$NNFMU_CACHE_DIR``; :mod:`nnfmu.training.rollout_library`). Without a compiler, or if
 compiling fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
@@ -41,8 +41,8 @@ from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
 from nnfmu.training import compiled_window
-from nnfmu.training.rollout_library import (FIXED, REALS, backward_buffers, check, library_or_none,
-                                            path_arguments, pointers, ptr)
+from nnfmu.training.rollout_library import (FIXED, REALS, backward_buffers, check, feedback_noise,
+                                            library_or_none, path_arguments, pointers, ptr)
 from nnfmu.training.rollout_library import library as _library  # noqa: F401 (tests build it directly)
 
 _library_or_none = library_or_none  # tests clear its cache
@@ -57,9 +57,8 @@ def compiled_rollout(model: StepModel):
     Applies to a model whose record names a ``rollout_cell`` (module docstring), or a
     :class:`LinearPathStepModel` on one, whose weights
     (and buffers of the path) are CPU float32/float64 tensors, without an init window or increment mode,
-    and whose dropout is inactive (eval mode, or zero), as is the feedback noise of a recurrent one; None otherwise,
-    and None with a
-    one-time RuntimeWarning when the library cannot be compiled.
+    and whose dropout is inactive (eval mode, or zero); None otherwise, and None with a one-time RuntimeWarning
+    when the library cannot be compiled.
     """
     if not _applies(model):
         return None
@@ -79,7 +78,7 @@ def training_rollout(model: StepModel):
     The compiled free run where it applies (:func:`compiled_rollout`; never with an init window
     ``past``), or the architecture's own (``Architecture.training_rollout``, e.g. the hybrid's CUDA graphs)
     where it gives one, else ``model.rollout_normalised(un, yn[:, 0], None, past)``. Call it after
-    ``model.train()`` and after setting ``model.feedback_noise``: both decide the path.
+    ``model.train()`` and after setting ``model.feedback_noise``: both decide what it computes.
     """
     own = architectures.architecture(model.config.arch).get("training_rollout")
     if own is not None and (free_run := own(model)) is not None:
@@ -112,8 +111,7 @@ def _applies(model: StepModel) -> bool:
     tensors = [*model.parameters(), *(getattr(model, name) for name in FIXED if net is not model)]
     if dtype not in REALS or any(t.device.type != "cpu" or t.dtype != dtype for t in tensors):
         return False
-    noise_in_c = record.rollout_cell in compiled_window.KINDS  # window_rollout.c adds torch's draws itself
-    return not (model.training and (net.config.dropout > 0 or (model.feedback_noise and not noise_in_c)))
+    return not (model.training and net.config.dropout > 0)  # feedback noise: torch's draws, added in C
 
 
 def _cell(model: StepModel) -> int:
@@ -129,11 +127,13 @@ def _weights(model: StepModel) -> list[torch.Tensor]:
 
 
 def _apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+    noise = model.feedback_noise if model.training else 0.0  # a path's noise, which its network's loop would add
     if type(model) is not LinearPathStepModel:
-        return _Rollout.apply(model, None, library, un, yn0, None, *_weights(model))
+        return _Rollout.apply(model, None, library, noise, un, yn0, None, *_weights(model))
     fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
     z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
-    return _Rollout.apply(model.net, fixed, library, un, yn0, z0, *_weights(model.net), model.lin_G, model.alpha)
+    return _Rollout.apply(model.net, fixed, library, noise, un, yn0, z0, *_weights(model.net), model.lin_G,
+                          model.alpha)
 
 
 def _header(model: StepModel, B: int, T: int) -> tuple:
@@ -149,14 +149,15 @@ class _Rollout(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, model, fixed, library, un, yn0, z0, *weights):
+    def forward(ctx, model, fixed, library, noise_std, un, yn0, z0, *weights):
         B, T, _ = un.shape
         c, dtype = model.config, weights[0].dtype
         un_t = un.detach().to(dtype).transpose(0, 1).contiguous()
         yn0 = yn0.detach().to(dtype).contiguous()
         z0 = None if z0 is None else z0.detach().to(dtype).contiguous()
         ys_t = un_t.new_empty(T, B, c.n_y)
-        keep = any(ctx.needs_input_grad[3:])
+        keep = any(ctx.needs_input_grad[4:])
+        noise = feedback_noise(noise_std, yn0, T)
         shape = (T, c.layers, B, c.hidden)
         hs = un_t.new_empty(shape) if keep else None
         cs = un_t.new_empty(shape) if keep and _cell(model) == _CELLS["lstm"] else None
@@ -164,24 +165,24 @@ class _Rollout(torch.autograd.Function):
         saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None
         status = library.nnfmu_rollout_forward(*_header(model, B, T), pointers(weights), ptr(un_t), ptr(yn0),
-                                               ptr(ys_t), ptr(hs), ptr(cs), ptr(saved), *path_arguments(fixed),
-                                               ptr(z0), ptr(ns))
+                                               ptr(noise), ptr(ys_t), ptr(hs), ptr(cs), ptr(saved),
+                                               *path_arguments(fixed), ptr(z0), ptr(ns))
         check(status, "free run", B, T)
         if keep:
             ctx.model, ctx.library, ctx.fixed = model, library, fixed
-            ctx.save_for_backward(un_t, ys_t, hs, cs, saved, ns, *weights)
+            ctx.save_for_backward(un_t, ys_t, noise, hs, cs, saved, ns, *weights)
         return ys_t.transpose(0, 1).to(un.dtype)
 
     @staticmethod
     def backward(ctx, gys):
-        un_t, ys_t, hs, cs, saved, ns, *weights = ctx.saved_tensors
+        un_t, ys_t, noise, hs, cs, saved, ns, *weights = ctx.saved_tensors
         T, B, _ = un_t.shape
         grads, gys_t, gyn0, gz0 = backward_buffers(weights, gys, ctx.fixed)
         status = ctx.library.nnfmu_rollout_backward(*_header(ctx.model, B, T), pointers(weights), ptr(un_t),
-                                                    ptr(ys_t), ptr(hs), ptr(cs), ptr(saved), ptr(gys_t),
+                                                    ptr(ys_t), ptr(noise), ptr(hs), ptr(cs), ptr(saved), ptr(gys_t),
                                                     pointers(grads), ptr(gyn0), *path_arguments(ctx.fixed), ptr(ns),
                                                     ptr(gz0))
         check(status, "back-propagation through the free run", B, T)
         needed = ctx.needs_input_grad
-        return (None, None, None, None, gyn0 if needed[4] else None, gz0 if needed[5] else None,
-                *(g if need else None for g, need in zip(grads, needed[6:])))
+        return (None, None, None, None, None, gyn0 if needed[5] else None, gz0 if needed[6] else None,
+                *(g if need else None for g, need in zip(grads, needed[7:])))

@@ -17,7 +17,8 @@ import torch
 
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.training.rollout_library import FIXED, backward_buffers, check, path_arguments, pointers, ptr
+from nnfmu.training.rollout_library import (FIXED, backward_buffers, check, feedback_noise, path_arguments,
+                                            pointers, ptr)
 
 ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # window_rollout.c's codes
 KINDS = {"tcn": 0, "mlp": 1}
@@ -68,11 +69,8 @@ class _WindowRollout(torch.autograd.Function):
         un_t = un.detach().to(dtype).transpose(0, 1).contiguous()
         yn0 = yn0.detach().to(dtype).contiguous()
         z0 = None if z0 is None else z0.detach().to(dtype).contiguous()
-        noise = fed = None
-        if noise_std:
-            draws = [noise_std * torch.randn_like(yn0) for _ in range(T - 1)]
-            noise = torch.stack(draws) if draws else yn0.new_empty(0, B, c.n_y)
-            fed = torch.empty_like(noise)
+        noise = feedback_noise(noise_std, yn0, T)
+        fed = None if noise is None else torch.empty_like(noise)
         ys_t = un_t.new_empty(T, B, c.n_y)
         keep = any(ctx.needs_input_grad[4:])
         shape = (max(T - 1, 0), c.layers, B, c.hidden)

@@ -5,8 +5,11 @@
  * torch.rnn_tanh_cell / rnn_relu_cell / lstm_cell / gru_cell, a linear readout and the optional skip
  * connection, for L stacked layers, without dropout:
  *
- *     x_k = [y_k, u_k];  h^l_{k+1} = cell_l(input^l, h^l_k);  input^0 = x_k, input^l = h^{l-1}_{k+1}
- *     y_{k+1} = y_k + skip_scale * (W_o h^{L-1}_{k+1} + b_o)   (skip)   or   W_o h^{L-1}_{k+1} + b_o
+ *     x_k = [y_k + e_k, u_k];  h^l_{k+1} = cell_l(input^l, h^l_k);  input^0 = x_k, input^l = h^{l-1}_{k+1}
+ *     y_{k+1} = y_k + e_k + skip_scale * (W_o h^{L-1}_{k+1} + b_o)   (skip)   or   W_o h^{L-1}_{k+1} + b_o
+ *
+ * e_k is the feedback noise of a training (zero without it), drawn by torch as its own loop draws it, one
+ * (B, n_y) draw per step, and passed in, so that both compute the same numbers.
  *
  * With a linear path of n_z > 0 states (LinearPathStepModel, nnfmu/models/linear_path.py) the readout above
  * is the network's raw output n_k, and the output is that of a fixed linear model plus a learned correction:
@@ -20,7 +23,8 @@
  * cost of a few microseconds each, not arithmetic, bounds training throughput at the batch sizes
  * used here. One call runs the whole rollout, one call its whole backward pass.
  *
- * Layout: time-major. un (T, B, n_u), yn0 (B, n_y), ys (T, B, n_y) with ys[0] = yn0.
+ * Layout: time-major. un (T, B, n_u), yn0 (B, n_y), ys (T, B, n_y) with ys[0] = yn0, noise (T - 1, B, n_y) e_k
+ * or NULL.
  * Parameters, in torch's layout, per layer: W_ih (G H, n_in), W_hh (G H, H), b_ih (G H), b_hh (G H);
  * then W_o (n_y, H), b_o (n_y); with a linear path then G (n_z, n_y), alpha (n_y). The path's fixed matrices
  * come separately, lin = {A, B, b, C, d}, row-major. G = 1 (RNN), 4 (LSTM: i, f, g, o), 3 (GRU: r, z, n).
@@ -165,13 +169,20 @@ static shape_t make_shape(int cell, int B, int T, int n_u, int n_y, int H, int L
   return s;
 }
 
+/* x (n_y + n_u) = [y_k + e_k, u_k] of row b (noise NULL: e_k = 0). */
+static void sample(int n_y, int n_u, const real *ys, const real *un, const real *noise, int B, int k, int b, real *x) {
+  const long at = ((long)k * B + b) * n_y;
+  for (int o = 0; o < n_y; ++o) x[o] = noise ? ys[at + o] + noise[at + o] : ys[at + o];
+  memcpy(x + n_y, un + ((long)k * B + b) * n_u, sizeof(real) * n_u);
+}
+
 /* The free run. hs, cs (T, L, B, H), saved (T - 1, L, B, S) and ns (T - 1, B, n_y) receive what the backward
  * pass needs; with hs == NULL only two steps are kept (inference). cs is used by the LSTM only. n_z > 0: the
  * linear path (lin, z0 (B, n_z); ns may be NULL for inference); n_z = 0: lin, z0 and ns are unused.
  * Returns 0, or -1 when memory runs out. */
 int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
-                          const real **params, const real *un, const real *yn0, real *ys, real *hs, real *cs,
-                          real *saved, int n_z, const real **lin, const real *z0, real *ns) {
+                          const real **params, const real *un, const real *yn0, const real *noise, real *ys,
+                          real *hs, real *cs, real *saved, int n_z, const real **lin, const real *z0, real *ns) {
   const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
   const long LBH = (long)L * B * H;
   const int n0 = n_y + n_u, GH = s.G * H, S = nnfmu_rollout_saved_width(cell, H);
@@ -191,10 +202,8 @@ int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L
     for (int k = 0; k + 1 < T; ++k) {
       const long now = (hs ? (long)k : (long)(k & 1)) * LBH, next = (hs ? (long)k + 1 : (long)((k + 1) & 1)) * LBH;
       for (int b = 0; b < B; ++b) {
-        const real *y = ys + ((long)k * B + b) * n_y;
-        memcpy(x, y, sizeof(real) * n_y);
-        memcpy(x + n_y, un + ((long)k * B + b) * n_u, sizeof(real) * n_u);
-        const real *in = x;
+        sample(n_y, n_u, ys, un, noise, B, k, b, x);
+        const real *y = x, *in = x;  /* y_k + e_k: what the cells see and the skip adds to */
         for (int l = 0; l < L; ++l) {
           const long at = ((long)l * B + b) * H;
           real *c_now = cell == LSTM ? c_all + now + at : NULL, *c_next = cell == LSTM ? c_all + next + at : NULL;
@@ -226,9 +235,9 @@ int nnfmu_rollout_forward(int cell, int B, int T, int n_u, int n_y, int H, int L
  * Each step runs layer by layer over the whole batch, so that the weight gradients of a step are sums
  * over the batch (outer_sum) instead of B separate updates. */
 int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int L, int has_skip, double skip,
-                           const real **params, const real *un, const real *ys, const real *hs, const real *cs,
-                           const real *saved, const real *gys, real **grads, real *gyn0, int n_z, const real **lin,
-                           const real *ns, real *gz0) {
+                           const real **params, const real *un, const real *ys, const real *noise, const real *hs,
+                           const real *cs, const real *saved, const real *gys, real **grads, real *gyn0, int n_z,
+                           const real **lin, const real *ns, real *gz0) {
   const shape_t s = make_shape(cell, B, T, n_u, n_y, H, L, has_skip, skip);
   const long LBH = (long)L * B * H, BH = (long)B * H;
   const int n0 = n_y + n_u, GH = s.G * H, n_max = n0 > H ? n0 : H, S = nnfmu_rollout_saved_width(cell, H);
@@ -261,8 +270,7 @@ int nnfmu_rollout_backward(int cell, int B, int T, int n_u, int n_y, int H, int 
       memcpy(dh + (long)b * H, carry_h + (long)(L - 1) * BH + (long)b * H, sizeof(real) * H);
       for (int o = 0; o < n_y; ++o)     /* dL/dh += W_o^T g */
         for (int j = 0; j < H; ++j) dh[(long)b * H + j] += g[o] * Wo[(long)o * H + j];
-      memcpy(x + (long)b * n0, ys + ((long)k * B + b) * n_y, sizeof(real) * n_y);
-      memcpy(x + (long)b * n0 + n_y, un + ((long)k * B + b) * n_u, sizeof(real) * n_u);
+      sample(n_y, n_u, ys, un, noise, B, k, b, x + (long)b * n0);
     }
     outer_sum(B, n_y, H, go, n_y, h_top, H, grads[4 * L]);
     for (int l = L - 1; l >= 0; --l) {

@@ -35,6 +35,16 @@ def ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
     return ctypes.c_void_p(None if t is None else t.data_ptr())
 
 
+def feedback_noise(std: float, yn0: torch.Tensor, T: int) -> torch.Tensor | None:
+    """The noise on the fed-back output of a free run of T steps, (T - 1, B, n_y), or None for ``std`` 0: drawn as
+    the torch loop draws it (``StepModel._feedback``: one ``randn_like`` of (B, n_y) a step, in order), so that the
+    C code computes the numbers torch would for the same seed."""
+    if not std:
+        return None
+    draws = [std * torch.randn_like(yn0) for _ in range(T - 1)]
+    return torch.stack(draws) if draws else yn0.new_empty(0, *yn0.shape)
+
+
 def backward_buffers(weights, gys: torch.Tensor, fixed) -> tuple:
     """What a backward call fills: the weights' gradients (zeroed), ``dL/dys`` time-major (T, B, n_y) in the weights'
     dtype, and the outputs ``dL/dyn0`` (B, n_y) and ``dL/dz0`` (B, n_z; None without a linear path)."""
@@ -89,8 +99,8 @@ def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
         entries = (lib.nnfmu_window_forward, lib.nnfmu_window_backward)
     else:
         header = [ctypes.c_int] * 8 + [ctypes.c_double]
-        lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 7 + path
-        lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 9 + path
+        lib.nnfmu_rollout_forward.argtypes = header + [ctypes.c_void_p] * 8 + path
+        lib.nnfmu_rollout_backward.argtypes = header + [ctypes.c_void_p] * 10 + path
         lib.nnfmu_rollout_saved_width.argtypes = [ctypes.c_int, ctypes.c_int]
         entries = (lib.nnfmu_rollout_forward, lib.nnfmu_rollout_backward, lib.nnfmu_rollout_saved_width)
     for entry in entries:
