@@ -95,6 +95,19 @@ def test_the_table_has_a_row_per_trial_and_marks_the_kept_one(capsys):
     assert lines[3].startswith("* kept")
 
 
+@pytest.mark.parametrize("record", ["", '{"status": "time-bud'])
+def test_a_trial_record_cut_off_by_the_end_of_the_search_is_a_row_not_a_traceback(tmp_path, record):
+    """Tune's time budget may end a worker while it writes its record (a 10-minute robot search was lost to
+    'JSONDecodeError' at its end): the row says Ray ended the trial, and the search keeps the others."""
+    from nnfmu.study.time_search import _row
+
+    (tmp_path / "trial-3.json").write_text(record)
+    point = {"arch": "gru", "hidden": 32, "lr": 3e-3, "feedback_noise": 0.0, "truncate": 200}
+    row = _row(3, point, tmp_path, stopped=False, last={"cpu_s": 4.0})
+    assert row["trial"] == 3 and row["epochs"] == 0 and row["best_valid_nrmse"] is None
+    assert row["status"].startswith("ended by Ray") and row["cpu_s"] == 4.0
+
+
 def _table(printed: str) -> list[list[str]]:
     lines = printed.splitlines()
     start = next(i for i, line in enumerate(lines) if line.split()[:2] == ["trial", "arch"])

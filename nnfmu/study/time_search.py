@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from unittest import mock
 
+from nnfmu.atomic import write_text_atomic
 from nnfmu.data import Dataset
 from nnfmu.errors import ConfigError, NnfmuError, TrainingError
 from nnfmu.study.ray_connect import ray_session, require_ray
@@ -223,7 +224,7 @@ def _trial(config: dict, dataset: Dataset | None = None, linear=None, job: dict 
         except NnfmuError as exc:
             row.update(status="failed", error=str(exc))
         row["cpu_s"] = time.process_time() - cpu0
-    (folder / f"trial-{i}.json").write_text(json.dumps(row))
+    write_text_atomic(folder / f"trial-{i}.json", json.dumps(row))  # a worker ended mid-write leaves no half record
 
 
 def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
@@ -234,7 +235,7 @@ def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
     row = {"trial": i, **point, "epochs": 0, "best_valid_nrmse": None, "stopped": stopped, "cpu_s": last.get("cpu_s"),
            "status": "ended by Ray before it finished (the search's time was up)", "error": None}
     record = folder / f"trial-{i}.json"
-    if record.is_file():
+    with contextlib.suppress(OSError, ValueError):  # none, or unreadable: the row says Ray ended the trial
         row.update(json.loads(record.read_text()))
     ckpt = folder / f"trial-{i}.pt"
     try:
