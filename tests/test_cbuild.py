@@ -88,7 +88,7 @@ def _compiled_paths(tmp_path: Path) -> dict[str, object]:
     from nnfmu.hybrid.compiled_torch import CompiledFunction
     from nnfmu.physics.compiled import compile_function
     from nnfmu.system import CasadiModel, SystemSpec
-    from nnfmu.training import compiled_rollout
+    from nnfmu.training import rollout_library
 
     x, u = ca.SX.sym("x"), ca.SX.sym("u")
     step = ca.Function("cbuild_step", [x, u], [ca.tanh(x) + u, x], ["x", "u"], ["x_next", "y_next"])
@@ -97,7 +97,7 @@ def _compiled_paths(tmp_path: Path) -> dict[str, object]:
     return {
         "fmu": build_fmu(model, tmp_path / "m.fmu"),
         "physics": compile_function(step),
-        "rollout": compiled_rollout._library(torch.float64),
+        "rollout": rollout_library.library(torch.float64),
         "hybrid": CompiledFunction(step),
     }
 

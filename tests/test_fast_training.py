@@ -18,6 +18,7 @@ from nnfmu.training import TrainConfig, train
 from nnfmu.training import compiled_rollout as cr
 from nnfmu.training.batches import _pad, _windows, epoch_batches
 from nnfmu.training.evaluate import free_run
+from nnfmu.training.rollout_library import library_or_none
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -34,13 +35,18 @@ def _model(arch, activation, layers, hidden, skip, dtype=torch.float64):
     return build_model(config).to(dtype)
 
 
+def _inputs(batch: int, steps: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Seeded normalised inputs (B, T, 3), initial outputs (B, 2) that take a gradient, and loss weights (B, T, 2)."""
+    g = torch.Generator().manual_seed(1)
+    un = torch.randn(batch, steps, 3, generator=g, dtype=torch.float64)
+    yn0 = torch.randn(batch, 2, generator=g, dtype=torch.float64, requires_grad=True)
+    return un, yn0, torch.randn(batch, steps, 2, generator=g, dtype=torch.float64)
+
+
 @pytest.mark.parametrize("arch, activation, layers, hidden, skip", CASES)
 def test_compiled_free_run_and_its_gradients_equal_torch_in_float64(arch, activation, layers, hidden, skip):
     model = _model(arch, activation, layers, hidden, skip)
-    g = torch.Generator().manual_seed(1)
-    un = torch.randn(5, 60, 3, generator=g, dtype=torch.float64)
-    yn0 = torch.randn(5, 2, generator=g, dtype=torch.float64, requires_grad=True)
-    weight = torch.randn(5, 60, 2, generator=g, dtype=torch.float64)
+    un, yn0, weight = _inputs(5, 60)
     rollout = cr.compiled_rollout(model)
     assert rollout is not None
     wanted, got = model.rollout_normalised(un, yn0), rollout(un, yn0)
@@ -59,10 +65,7 @@ def test_with_feedback_noise_the_compiled_free_run_adds_torch_s_draws(arch):
     values and gradients equal torch's loop for the same seed, and another seed gives other numbers."""
     model = _model(arch, "tanh", 2, 8, True).train()
     model.feedback_noise = 0.3
-    g = torch.Generator().manual_seed(1)
-    un = torch.randn(4, 40, 3, generator=g, dtype=torch.float64)
-    yn0 = torch.randn(4, 2, generator=g, dtype=torch.float64, requires_grad=True)
-    weight = torch.randn(4, 40, 2, generator=g, dtype=torch.float64)
+    un, yn0, weight = _inputs(4, 40)
     rollout = cr.compiled_rollout(model)
     assert rollout is not None
     torch.manual_seed(7)
@@ -122,12 +125,12 @@ def test_without_a_c_compiler_training_runs_in_torch_with_a_warning(monkeypatch,
         raise FmuBuildError("no C compiler found: looked for 'cc' (PATH)")
 
     monkeypatch.setattr("nnfmu.cbuild.compiler_argv", no_compiler)
-    cr._library_or_none.cache_clear()
+    library_or_none.cache_clear()
     try:
         with pytest.warns(RuntimeWarning, match="torch instead of compiled C"):
             assert cr.compiled_rollout(_model("gru", "tanh", 1, 8, True)) is None
     finally:
-        cr._library_or_none.cache_clear()
+        library_or_none.cache_clear()
 
 
 @pytest.mark.parametrize("arch", ["gru", "lstm"])

@@ -86,11 +86,12 @@ TINY_DEMO = textwrap.dedent("""
     import sys
     import torch
     import nnfmu
-    from nnfmu.training.compiled_rollout import _library_or_none
+    from nnfmu.training.rollout_library import library_or_none
     from nnfmu.study import Hyper, get_budget, run_demo
 
     print("nnfmu from", nnfmu.__file__)
-    assert _library_or_none(torch.float32) is not None, "rollout.c did not compile"
+    for stem in ("rollout", "window_rollout"):
+        assert library_or_none(torch.float32, stem) is not None, stem + ".c did not compile"
     budget = get_budget("valve", "demo").replace(
         data_size="small", max_train=None, max_test=None, epochs=2, max_minutes=None,
         hyper={"gru": Hyper(hidden=8, batch_size=16)}, linear={"refine": False, "max_order": 4})

@@ -42,10 +42,7 @@ from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
 from nnfmu.training import compiled_window
 from nnfmu.training.rollout_library import (FIXED, REALS, backward_buffers, check, feedback_noise,
-                                            library_or_none, path_arguments, pointers, ptr)
-from nnfmu.training.rollout_library import library as _library  # noqa: F401 (tests build it directly)
-
-_library_or_none = library_or_none  # tests clear its cache
+                                            library_or_none, path_arguments, pointers, ptr, run)
 
 _CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}  # rollout.c's cells; an 'rnn' by its activation
 ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
@@ -127,13 +124,7 @@ def _weights(model: StepModel) -> list[torch.Tensor]:
 
 
 def _apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-    noise = model.feedback_noise if model.training else 0.0  # a path's noise, which its network's loop would add
-    if type(model) is not LinearPathStepModel:
-        return _Rollout.apply(model, None, library, noise, un, yn0, None, *_weights(model))
-    fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
-    z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
-    return _Rollout.apply(model.net, fixed, library, noise, un, yn0, z0, *_weights(model.net), model.lin_G,
-                          model.alpha)
+    return run(_Rollout, model, library, un, yn0, _weights)
 
 
 def _header(model: StepModel, B: int, T: int) -> tuple:

@@ -16,9 +16,7 @@ import ctypes
 import torch
 
 from nnfmu.models.base import StepModel
-from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.training.rollout_library import (FIXED, backward_buffers, check, feedback_noise, path_arguments,
-                                            pointers, ptr)
+from nnfmu.training.rollout_library import backward_buffers, check, feedback_noise, path_arguments, pointers, ptr, run
 
 ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # window_rollout.c's codes
 KINDS = {"tcn": 0, "mlp": 1}
@@ -27,13 +25,7 @@ KINDS = {"tcn": 0, "mlp": 1}
 def apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
     """The free run of ``model`` (a TCN or MLP, or a linear path on one): (B, T, n_u), (B, n_y) -> (B, T, n_y),
     normalised."""
-    noise = model.feedback_noise if model.training else 0.0  # the path's noise, which its network's loop would add
-    if type(model) is not LinearPathStepModel:
-        return _WindowRollout.apply(model, None, library, noise, un, yn0, None, *_weights(model))
-    fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
-    z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
-    return _WindowRollout.apply(model.net, fixed, library, noise, un, yn0, z0, *_weights(model.net), model.lin_G,
-                                model.alpha)
+    return run(_WindowRollout, model, library, un, yn0, _weights)
 
 
 def _weights(model: StepModel) -> list[torch.Tensor]:

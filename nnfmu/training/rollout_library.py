@@ -14,6 +14,8 @@ from pathlib import Path
 import torch
 
 from nnfmu.errors import FmuBuildError, SimulationError
+from nnfmu.models.base import StepModel
+from nnfmu.models.linear_path import LinearPathStepModel
 
 _HERE = Path(__file__).parent
 _FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fopenmp-simd", "-fPIC", "-shared")
@@ -33,6 +35,19 @@ def path_arguments(fixed) -> tuple:
 
 def ptr(t: torch.Tensor | None) -> ctypes.c_void_p:
     return ctypes.c_void_p(None if t is None else t.data_ptr())
+
+
+def run(function, model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor, weights_of):
+    """``function.apply`` (a compiled free run's autograd Function) on ``model``, or on the network of its linear path
+    with the path's fixed model, initial state and correction gains; ``weights_of(network)``: its weights in the C
+    file's order. The feedback noise is the model's own in training (a path's, which its network's loop adds)."""
+    noise = model.feedback_noise if model.training else 0.0
+    if type(model) is not LinearPathStepModel:
+        return function.apply(model, None, library, noise, un, yn0, None, *weights_of(model))
+    fixed = [getattr(model, name).detach().contiguous() for name in FIXED]
+    z0 = model._z0(yn0, un[:, 0])  # torch: its gradient reaches yn0 through lin_Ky
+    return function.apply(model.net, fixed, library, noise, un, yn0, z0, *weights_of(model.net), model.lin_G,
+                          model.alpha)
 
 
 def feedback_noise(std: float, yn0: torch.Tensor, T: int) -> torch.Tensor | None:
