@@ -21,8 +21,8 @@ It applies to a model whose architecture's record names the compiled cell that c
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
 the CPU in float32 or float64, with no active dropout (eval mode, or zero), no init window and no increment mode.
-Feedback noise in training is drawn by torch as its own loop draws it and added in C, so the numbers are the same. The library is compiled at first use with
-the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
+Feedback noise in training is drawn by torch as its own loop draws it and added in C, so the numbers are the
+same. The library is compiled at first use with the system C compiler (``-O3 -march=native``, glibc's vector ``exp``/``tanh``) and cached
 like the compiled physics (``$NNFMU_CACHE_DIR``; :mod:`nnfmu.training.rollout_library`). Without a compiler, or if
 compiling fails, :func:`compiled_rollout` warns once and returns None: torch runs the free run
 (slower, same numbers). ``NNFMU_COMPILED_ROLLOUT=0`` turns the C path off.
