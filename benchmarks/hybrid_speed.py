@@ -1,6 +1,6 @@
 """Hybrid training speed in trajectory-steps per second, forward and backward, on the CPU and on a CUDA GPU.
 
-A hybrid valve (derivative correction, 32 hidden, float64 as the hybrid trains) runs what the
+A hybrid valve or arm (``--physics``; derivative correction, 32 hidden, float64 as the hybrid trains) runs what the
 trainer runs per batch: the free run of ``--batch`` trajectories over windows of ``--steps``
 samples (inputs near the valve's operating point, as benchmarks/hybrid_step.py), then the backward
 pass of the mean squared output. One trajectory-step is one sample of one trajectory, forward and
@@ -60,15 +60,15 @@ def switches(*, compiled: bool, fused_kernels: bool = False):
             os.environ[ENV_SWITCH] = old_env
 
 
-def paths(device: str, batch: int, steps: int, hidden: int) -> dict:
+def paths(device: str, batch: int, steps: int, hidden: int, physics: str = "valve") -> dict:
     """name -> (model, un, yn0, free_run(un, yn0), switch settings)."""
     if device == "cpu":
-        sx = model_and_batch("valve", batch, steps, hidden, backend="sx")
-        compiled = model_and_batch("valve", batch, steps, hidden)
+        sx = model_and_batch(physics, batch, steps, hidden, backend="sx")
+        compiled = model_and_batch(physics, batch, steps, hidden)
         return {"sx, per-stage": (*sx, None, {"compiled": False}),
                 "compiled, per-stage": (*compiled, None, {"compiled": False}),
                 "compiled, fused": (*compiled, None, {"compiled": True})}
-    model, un, yn0 = (t.to(device) for t in model_and_batch("valve", batch, steps, hidden, backend="sx"))
+    model, un, yn0 = (t.to(device) for t in model_and_batch(physics, batch, steps, hidden, backend="sx"))
     return {"sx, eager": (model, un, yn0, None, {"compiled": False}),
             "sx, fused kernels": (model, un, yn0, None, {"compiled": True, "fused_kernels": True}),
             "sx, graphed": (model, un, yn0, graphed.RecordedFreeRuns(), {"compiled": True}),
@@ -103,14 +103,17 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=40, help="trajectories per batch (the small valve set has 40)")
     p.add_argument("--steps", type=int, default=50, help="samples per window")
     p.add_argument("--hidden", type=int, default=32)
+    p.add_argument("--physics", default="valve", choices=["valve", "arm"],
+                   help="the arm: 12 states, a 4208-instruction ODE, 50 RK4 sub-steps a sample (the CPU's fused row "
+                        "equals its per-stage one: nnfmu.hybrid.fused.MAX_ODE_INSTRUCTIONS)")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--paths", nargs="+", metavar="PATH",
                    help="only these rows, by name (e.g. 'sx, eager' 'sx, fused + graphed'); the first is the base")
     args = p.parse_args()
     torch.set_num_threads(1)
     where = torch.cuda.get_device_name() if args.device.startswith("cuda") else platform.processor() or "cpu"
-    print(f"hybrid valve, batch {args.batch} x {args.steps} steps, float64, torch {torch.__version__}, {where}")
-    table = paths(args.device, args.batch, args.steps, args.hidden)
+    print(f"hybrid {args.physics}, batch {args.batch} x {args.steps} steps, float64, torch {torch.__version__}, {where}")
+    table = paths(args.device, args.batch, args.steps, args.hidden, args.physics)
     if args.paths:
         unknown = sorted(set(args.paths) - set(table))
         if unknown:
