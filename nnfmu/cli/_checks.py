@@ -78,7 +78,7 @@ RULES: dict[str | tuple[str, str], Rule] = {
     # linear
     "order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "max_order": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
-    "max_evaluations": Rule(1, 10_000_000),
+    "max_evaluations": Rule(1, 10_000_000), "max_windows": Rule(1, 100_000_000),
     "order_candidates": Rule(1, MAX_LINEAR_ORDER, constant="nnfmu.limits.MAX_LINEAR_ORDER"),
     "holdout": Rule(0, 1, hi_open=True, fix="e.g. 0.2, or 0 for the whole record"),
     # fit

@@ -46,6 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-evaluations", type=int, default=100, metavar="N",
                    help="residual evaluations (trf) or iterations (ipopt) per start (default 100)")
     p.add_argument("--n-sub", type=int, metavar="N", help="RK4 sub-steps per sample (default: the model's own)")
+    p.add_argument("--max-windows", type=int, metavar="N",
+                   help="fit on at most N windows spread evenly over the training split (default: all); for "
+                        "a model whose iteration over every window takes too long")
+    p.add_argument("--compile", choices=["auto", "on", "off"], default="auto",
+                   help="run the windows' free runs and sensitivities as compiled C: auto (default) for large "
+                        "models (the ODE's instructions times the sub-steps from 20,000, as the arm), same values")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -103,7 +109,10 @@ def _summary(system, report: dict) -> list[str]:
         rmse = ", ".join(f"{n} {o['rmse']:.4g} {o.get('unit', '')}".rstrip() for n, o in s["outputs"].items())
         lines.append(f"{split}: NRMSE {s['nrmse']:.4f}, fit {s['fit_percent']:.1f} %, RMSE {rmse}")
     lines += report["notes"]
-    lines.append(f"{len(report['starts'])} start(s), {report['windows']} windows of {report['window']} samples, "
+    spread = (f" (of {report['windows_in_split']}, spread over the training split)"
+              if report["windows"] < report["windows_in_split"] else "")
+    lines.append(f"{len(report['starts'])} start(s), {report['windows']} windows{spread} of {report['window']} "
+                 f"samples, {'compiled C' if report['compiled'] else 'CasADi virtual machine'}, "
                  f"{report['seconds']:.1f} s")
     return lines
 
@@ -117,7 +126,8 @@ def _run(args: argparse.Namespace) -> int:
     config = FitConfig(free=_names(args.free), fixed=_names(args.fixed) or (), bounds=parse_bounds(args.bounds),
                        start={n: _number(v, "--start", n) for n, v in _pairs(args.start, "--start")},
                        window=args.window, starts=args.starts, seed=args.seed, solver=args.solver,
-                       max_evaluations=args.max_evaluations, n_sub=args.n_sub)
+                       max_evaluations=args.max_evaluations, n_sub=args.n_sub, max_windows=args.max_windows,
+                       compile=args.compile)
     out = Path(args.out)
     check_writable(out)
     system = resolve_physics(args.system)

@@ -23,14 +23,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nnfmu.errors import ConfigError
-from nnfmu.greybox.problem import build_problem, cut_windows, theta_scales
+from nnfmu.greybox.problem import Windows, build_problem, cut_windows, theta_scales
 from nnfmu.greybox.setup import Unknowns, check_dataset, choose_unknowns, spread_starts
 from nnfmu.greybox.solvers import SOLVERS, solve
+from nnfmu.greybox.window import compile_worthwhile
 from nnfmu.metrics import nrmse
 from nnfmu.physics.base import PhysicsSystem
 from nnfmu.progress import tqdm
 
-__all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "standard_errors", "score_system"]
+__all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "standard_errors", "score_system", "COMPILE_CHOICES"]
+
+COMPILE_CHOICES = ("auto", "on", "off")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -57,6 +60,13 @@ class FitConfig:
         Residual evaluations (trf) or iterations (IPOPT) per start.
     n_sub : int, optional
         RK4 sub-steps per sample (default the model's own).
+    max_windows : int, optional
+        Fit on at most this many windows, spread evenly over the training split (default: every window).
+        For a model whose iteration over the whole split takes too long (the arm on the robot).
+    compile : str
+        ``"auto"`` (default): the windows' free runs and sensitivities run as compiled C when the ODE's
+        instructions times the sub-steps reach :data:`~nnfmu.greybox.window.COMPILE_MIN_INSTRUCTIONS`;
+        ``"on"`` or ``"off"`` decide. Same values either way.
     """
 
     free: tuple[str, ...] | None = None
@@ -69,11 +79,15 @@ class FitConfig:
     solver: str = "trf"
     max_evaluations: int = 100
     n_sub: int | None = None
+    max_windows: int | None = None
+    compile: str = "auto"
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
             raise ConfigError(f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
-        for name, low in (("window", 2), ("starts", 1), ("max_evaluations", 1), ("n_sub", 1)):
+        if self.compile not in COMPILE_CHOICES:
+            raise ConfigError(f"compile must be one of {', '.join(COMPILE_CHOICES)}, got {self.compile!r}")
+        for name, low in (("window", 2), ("starts", 1), ("max_evaluations", 1), ("n_sub", 1), ("max_windows", 1)):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or int(value) != value or value < low):
                 raise ConfigError(f"{name} must be a whole number >= {low}, got {value!r}")
@@ -208,13 +222,15 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
     system = _with_starts(system, config.start)  # a start given for a fixed parameter is its value
     train = dataset.train
     length = int(min(config.window, train.lengths.min()))
-    windows = cut_windows(train.u, train.y, length)
+    every_window = cut_windows(train.u, train.y, length)
+    windows = _spread(every_window, config.max_windows)
     y_all = np.concatenate(train.y)
     y_std = np.maximum(y_all.std(axis=0), 1e-12 * np.maximum(1.0, np.abs(y_all.mean(axis=0))))
     p_start = system.parameter_values()
     scale = theta_scales(unknowns.start, unknowns.lower, unknowns.upper)
     n_sub = config.n_sub or system.n_sub
-    problem = build_problem(system, windows, unknowns.index, p_start, scale, y_std, n_sub=n_sub)
+    compiled = config.compile == "on" or (config.compile == "auto" and compile_worthwhile(system, n_sub))
+    problem = build_problem(system, windows, unknowns.index, p_start, scale, y_std, n_sub=n_sub, compile=compiled)
     best, runs = _run_starts(system, problem, windows, unknowns, config, progress)
     if best is None or best.z is None:
         raise ConfigError("every starting point gave NaN or Inf; give starts where the model's free run is finite")
@@ -231,12 +247,21 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
                             "start": float(unknowns.start[j]), "min": _finite(unknowns.lower[j]),
                             "max": _finite(unknowns.upper[j]), "at_bound": at_bound, "description": v.description}
     report = {"model": system.name, "solver": config.solver, "window": length, "windows": windows.n_w,
-              "n_sub": n_sub, "residuals": n_r, "unknowns": problem.n_z, "cost": best.cost,
+              "windows_in_split": every_window.n_w,
+              "n_sub": n_sub, "compiled": compiled, "residuals": n_r, "unknowns": problem.n_z, "cost": best.cost,
               "residual_rms": float(np.sqrt(2.0 * best.cost / n_r)), "parameters": parameters,
               "fixed": {v.name: v.start for i, v in enumerate(system.parameters) if i not in set(unknowns.index)},
               "starts": runs, "notes": best.notes, "scores": score_system(fitted, dataset, n_sub=n_sub)}
     report["seconds"] = round(time.perf_counter() - t0, 3)
     return GreyboxFit(system=fitted, report=report)
+
+
+def _spread(windows: Windows, most: int | None) -> Windows:
+    """At most ``most`` of ``windows``, evenly spread over them (first and last kept); all when None."""
+    if most is None or windows.n_w <= most:
+        return windows
+    pick = np.unique(np.linspace(0, windows.n_w - 1, most).round().astype(int))
+    return Windows(windows.u[pick], windows.y[pick])
 
 
 def _finite(x: float) -> float | None:

@@ -25,8 +25,9 @@ import casadi as ca
 import numpy as np
 
 from nnfmu.errors import ShapeError
+from nnfmu.greybox.window import window_functions
 from nnfmu.physics.base import PhysicsSystem
-from nnfmu.physics.rk4 import rk4_function
+from nnfmu.physics.compiled import compile_function
 
 __all__ = ["Windows", "cut_windows", "Problem", "build_problem", "theta_scales"]
 
@@ -168,57 +169,6 @@ class Problem:
         return J
 
 
-def _sensitivity_step(system: PhysicsSystem, n_sub: int, select: np.ndarray) -> ca.Function:
-    """``step(x, S, u, p) -> (x_next, S_next)``: one RK4 sample and its forward sensitivity (SX).
-
-    ``S = dx / d[x0, theta]`` (n_x, n_x + n_f); ``dp / dtheta = select``.
-    """
-    step = rk4_function(system.ode, Ts=system.Ts, n_sub=n_sub, name=f"{system.name}_rk4")
-    n_x, n_f = system.n_x, select.shape[1]
-    x, S = ca.SX.sym("x", n_x), ca.SX.sym("S", n_x, n_x + n_f)
-    u, p = ca.SX.sym("u", len(system.inputs)), ca.SX.sym("p", len(system.parameters))
-    x_next = step(x, u, p) if step.is_a("SXFunction") else None
-    if x_next is None:  # a folded MX step (many sub-steps): differentiate it as it is
-        xm, Sm = ca.MX.sym("x", n_x), ca.MX.sym("S", n_x, n_x + n_f)
-        um, pm = ca.MX.sym("u", len(system.inputs)), ca.MX.sym("p", len(system.parameters))
-        xn = step(xm, um, pm)
-        Sn = ca.jacobian(xn, xm) @ Sm + ca.horzcat(ca.MX(n_x, n_x), ca.jacobian(xn, pm) @ ca.DM(select))
-        return ca.Function("sensitivity_step", [xm, Sm, um, pm], [xn, Sn], ["x", "S", "u", "p"], ["x_next", "S_next"])
-    S_next = ca.jacobian(x_next, x) @ S + ca.horzcat(ca.SX(n_x, n_x), ca.jacobian(x_next, p) @ ca.DM(select))
-    return ca.Function("sensitivity_step", [x, S, u, p], [x_next, S_next], ["x", "S", "u", "p"], ["x_next", "S_next"])
-
-
-def _output_sensitivity(system: PhysicsSystem, select: np.ndarray) -> ca.Function:
-    """``out(x, S, p) -> (y, dy)``: the output and its derivative ``dy/d[x0, theta] = dg/dx S + [0, dg/dp select]``."""
-    n_x, n_y, n_f = system.n_x, len(system.outputs), select.shape[1]
-    x, S, p = ca.SX.sym("x", n_x), ca.SX.sym("S", n_x, n_x + n_f), ca.SX.sym("p", len(system.parameters))
-    y = system.output(x, p)
-    dy = ca.jacobian(y, x) @ S + ca.horzcat(ca.SX(n_y, n_x), ca.jacobian(y, p) @ ca.DM(select))
-    return ca.Function("output_sensitivity", [x, S, p], [y, dy], ["x", "S", "p"], ["y", "dy"])
-
-
-def _window_functions(system: PhysicsSystem, length: int, n_sub: int, base: np.ndarray,
-                      select: np.ndarray) -> tuple[ca.Function, ca.Function]:
-    """``window(x0[n_x], U[n_u, L-1], theta[n_f]) -> Y[n_y, L]``, one free run from ``x0``, and the same with
-    ``-> (Y, D[n_y, L (n_x + n_f)])``, ``D``'s block k being ``dy_k / d[x0, theta]``.
-
-    ``p = base + select theta``; the derivatives are forward sensitivities carried along the RK4 steps.
-    """
-    n_x, n_f = system.n_x, select.shape[1]
-    step = rk4_function(system.ode, Ts=system.Ts, n_sub=n_sub, name=f"{system.name}_rk4")
-    x0, theta = ca.MX.sym("x0", n_x), ca.MX.sym("theta", n_f)
-    U = ca.MX.sym("U", len(system.inputs), length - 1)
-    p = ca.DM(base) + ca.DM(select) @ theta
-    P, P1 = ca.repmat(p, 1, length - 1), ca.repmat(p, 1, length)
-    X = ca.horzcat(x0, step.mapaccum("run", length - 1)(x0, U, P))
-    names = ["x0", "U", "theta"]
-    plain = ca.Function("window", [x0, U, theta], [system.output.map(length)(X, P1)], names, ["Y"])
-    S0 = ca.horzcat(ca.DM.eye(n_x), ca.DM(n_x, n_f))
-    Xs, Ss = _sensitivity_step(system, n_sub, select).mapaccum("runs", length - 1, [0, 1], [0, 1])(x0, S0, U, P)
-    Y, D = _output_sensitivity(system, select).map(length)(ca.horzcat(x0, Xs), ca.horzcat(S0, Ss), P1)
-    return plain, ca.Function("window_derivatives", [x0, U, theta], [Y, D], names, ["Y", "D"])
-
-
 def theta_scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """A typical magnitude per free parameter: ``|start|``, else the bounds' width, else 1."""
     width = np.where(np.isfinite(upper - lower), upper - lower, 0.0)
@@ -226,8 +176,13 @@ def theta_scales(start: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.
 
 
 def build_problem(system: PhysicsSystem, windows: Windows, free: np.ndarray, p_fixed: np.ndarray,
-                  theta_scale: np.ndarray, y_std: np.ndarray, *, n_sub: int) -> Problem:
-    """The :class:`Problem` of ``system`` on ``windows`` (free parameter indices ``free``; module docstring)."""
+                  theta_scale: np.ndarray, y_std: np.ndarray, *, n_sub: int, compile: bool = False) -> Problem:
+    """The :class:`Problem` of ``system`` on ``windows`` (free parameter indices ``free``; module docstring).
+
+    ``compile``: the window Functions behind ``outputs`` and ``derivatives`` run as compiled C (same values;
+    without a working C compiler they stay in CasADi's virtual machine, with a warning). ``residuals``, which
+    IPOPT differentiates, stays a CasADi graph.
+    """
     n_x, n_w, L = system.n_x, windows.n_w, windows.length
     x_scale = np.asarray(system.state_scales or (1.0,) * n_x, dtype=float)
     free, n_f = np.asarray(free, dtype=int), len(free)
@@ -236,10 +191,12 @@ def build_problem(system: PhysicsSystem, windows: Windows, free: np.ndarray, p_f
     base = np.asarray(p_fixed, dtype=float).copy()
     base[free] = 0.0
     U = ca.DM(np.concatenate([w[:-1].T for w in windows.u], axis=1))  # (n_u, n_w (L-1)), window after window
-    plain, derivatives = (f.map("windows", "serial", n_w, [2], [])
-                          for f in _window_functions(system, L, n_sub, base, select))
+    window, window_derivatives = window_functions(system, L, n_sub, base, select)
+    plain = window.map("windows", "serial", n_w, [2], [])
+    run, derivatives = ((compile_function(f) if compile else f).map("windows", "serial", n_w, [2], [])
+                        for f in (window, window_derivatives))
     X0, theta = ca.MX.sym("X0", n_x, n_w), ca.MX.sym("theta", n_f)
-    outputs = ca.Function("outputs", [X0, theta], [plain(X0, U, theta)], ["X0", "theta"], ["Y"])
+    outputs = ca.Function("outputs", [X0, theta], [run(X0, U, theta)], ["X0", "theta"], ["Y"])
     derivatives = ca.Function("derivatives", [X0, theta], derivatives(X0, U, theta), ["X0", "theta"], ["Y", "D"])
     measured = np.concatenate([w.T for w in windows.y], axis=1)
     y_std = np.asarray(y_std, dtype=float)
