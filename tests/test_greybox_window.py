@@ -77,3 +77,23 @@ def test_max_windows_fits_on_a_spread_of_the_windows_and_says_so(slider_data, tm
 def test_bad_window_options_are_refused(bad):
     with pytest.raises(ConfigError):
         FitConfig(**bad)
+
+
+def test_a_large_problem_takes_a_sparse_jacobian_equal_to_the_dense_one_and_fits_the_same(slider_data, monkeypatch):
+    from nnfmu.greybox import problem as problem_module
+
+    system = slider_system()
+    windows = cut_windows(slider_data.train.u, slider_data.train.y, 50)
+    p = system.parameter_values()
+    problem = build_problem(system, windows, np.array([0, 1]), p, p[:2], np.array([0.3]), n_sub=4)
+    z = problem.pack(p[:2] * [1.2, 0.8], np.column_stack([windows.y[:, 0, 0], np.zeros(windows.n_w)]))
+    dense = problem.jacobian(z)
+    assert problem.dense and isinstance(dense, np.ndarray)
+    config = FitConfig(free=("m", "d"), start={"m": 1.3, "d": 1.6}, window=50, max_evaluations=40)
+    exact = fit_greybox(system, slider_data, config).report["parameters"]
+    monkeypatch.setattr(problem_module, "DENSE_MAX_WORK", 0)  # as for the arm's 17,100 x 1818 Jacobian
+    assert not problem.dense
+    np.testing.assert_allclose(problem.jacobian(z).toarray(), dense, rtol=0, atol=0)
+    sparse = fit_greybox(system, slider_data, config).report["parameters"]  # trf's steps by LSMR
+    for name in ("m", "d"):
+        assert abs(sparse[name]["value"] - exact[name]["value"]) < 0.2 * exact[name]["std_error"], name

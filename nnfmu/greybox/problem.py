@@ -29,7 +29,11 @@ from nnfmu.greybox.window import window_functions
 from nnfmu.physics.base import PhysicsSystem
 from nnfmu.physics.compiled import compile_function
 
-__all__ = ["Windows", "cut_windows", "Problem", "build_problem", "theta_scales"]
+__all__ = ["Windows", "cut_windows", "Problem", "build_problem", "theta_scales", "DENSE_MAX_WORK"]
+
+#: ``n_r n_z^2`` up to which the Jacobian is dense and trf's trust-region steps exact (an SVD, about a second
+#: here); above it a sparse Jacobian and LSMR steps (:attr:`Problem.dense`).
+DENSE_MAX_WORK = 1e10
 
 
 @dataclass(frozen=True)
@@ -150,8 +154,18 @@ class Problem:
         D = D.reshape(n_w, -1, n_x + n_f)
         return D[:, :, n_x:] * self.theta_scale, D[:, :, :n_x] * self.x_scale
 
+    @property
+    def n_r(self) -> int:
+        return self.measured.size
+
+    @property
+    def dense(self) -> bool:
+        """Whether the Jacobian is small enough to be dense and solved exactly (by SVD): ``n_r n_z^2`` up to
+        :data:`DENSE_MAX_WORK`. The arm on 150 windows (17,100 x 1818) is above it: one SVD of it took minutes."""
+        return self.n_r * self.n_z ** 2 <= DENSE_MAX_WORK
+
     def jacobian(self, z: np.ndarray):
-        """``J(z)``, shape ``(n_r, n_z)``: dense up to 2000 unknowns, else a scipy CSR matrix.
+        """``J(z)``, shape ``(n_r, n_z)``: dense where :attr:`dense`, else a scipy CSR matrix.
 
         Each window's rows depend on theta and its own initial state only (an arrow-shaped pattern).
         """
@@ -160,7 +174,7 @@ class Problem:
         dt, dx = self.blocks(z)
         n_w, rows = dx.shape[:2]
         dt = dt.reshape(n_w * rows, self.n_f)
-        if self.n_z > 2000:
+        if not self.dense:
             return sp.hstack([sp.csr_matrix(dt), sp.block_diag(list(dx), format="csr")], format="csr")
         J = np.zeros((n_w * rows, self.n_z))
         J[:, :self.n_f] = dt

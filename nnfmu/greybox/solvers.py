@@ -82,7 +82,7 @@ def _trf(problem, z0, lower, upper, max_evaluations, tracker) -> str:
     # x_scale 1: z is scaled already (module docstring); "jac" crawled on the valve (40 evaluations, not converged,
     # where 1 converged in 20)
     result = least_squares(fun, z0, jac=problem.jacobian, bounds=(lower, upper), method="trf", x_scale=1.0,
-                           max_nfev=max_evaluations, tr_solver="lsmr" if problem.n_z > 2000 else "exact")
+                           max_nfev=max_evaluations, tr_solver="exact" if problem.dense else "lsmr")
     return result.message
 
 
