@@ -97,3 +97,12 @@ def test_a_large_problem_takes_a_sparse_jacobian_equal_to_the_dense_one_and_fits
     sparse = fit_greybox(system, slider_data, config).report["parameters"]  # trf's steps by LSMR
     for name in ("m", "d"):
         assert abs(sparse[name]["value"] - exact[name]["value"]) < 0.2 * exact[name]["std_error"], name
+
+
+def test_compiled_scores_equal_the_virtual_machines(slider_data):
+    from nnfmu.greybox import score_system
+
+    system = slider_system()
+    vm, compiled = (score_system(system, slider_data, compile=c) for c in (False, True))
+    for split in ("train", "test"):
+        assert compiled[split]["nrmse"] == pytest.approx(vm[split]["nrmse"], rel=1e-12)

@@ -29,6 +29,7 @@ from nnfmu.greybox.solvers import SOLVERS, solve
 from nnfmu.greybox.window import compile_worthwhile
 from nnfmu.metrics import nrmse
 from nnfmu.physics.base import PhysicsSystem
+from nnfmu.physics.compiled import compile_function
 from nnfmu.progress import tqdm
 
 __all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "standard_errors", "score_system", "COMPILE_CHOICES"]
@@ -116,9 +117,15 @@ def standard_errors(problem, z: np.ndarray, cost: float) -> np.ndarray:
     return problem.theta_scale * np.sqrt(np.clip(np.diag(covariance), 0.0, None))
 
 
-def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None) -> dict:
-    """``{split: scores}``: the free run of every record from its first sample, NRMSE / RMSE / fit % per split."""
+def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, compile: bool = False) -> dict:
+    """``{split: scores}``: the free run of every record from its first sample, NRMSE / RMSE / fit % per split.
+
+    ``compile``: the RK4 step runs as compiled C (same values; the arm's 36,300 training samples took 4 minutes
+    in CasADi's virtual machine).
+    """
     model = system.model(n_sub=n_sub, expose_parameters=False)
+    if compile:
+        model = dataclasses.replace(model, step=compile_function(model.step))
     out = {}
     for name, split in dataset.splits.items():
         predictions = [model.simulate(u, y[0]) for u, y in zip(split.u, split.y)]
@@ -251,7 +258,7 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
               "n_sub": n_sub, "compiled": compiled, "residuals": n_r, "unknowns": problem.n_z, "cost": best.cost,
               "residual_rms": float(np.sqrt(2.0 * best.cost / n_r)), "parameters": parameters,
               "fixed": {v.name: v.start for i, v in enumerate(system.parameters) if i not in set(unknowns.index)},
-              "starts": runs, "notes": best.notes, "scores": score_system(fitted, dataset, n_sub=n_sub)}
+              "starts": runs, "notes": best.notes, "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled)}
     report["seconds"] = round(time.perf_counter() - t0, 3)
     return GreyboxFit(system=fitted, report=report)
 
