@@ -104,15 +104,16 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=50, help="samples per window")
     p.add_argument("--hidden", type=int, default=32)
     p.add_argument("--physics", default="valve", choices=["valve", "arm"],
-                   help="the arm: 12 states, a 4208-instruction ODE, 50 RK4 sub-steps a sample (the CPU's fused row "
-                        "equals its per-stage one: nnfmu.hybrid.fused.MAX_ODE_INSTRUCTIONS)")
+                   help="the arm: 12 states, a 4208-instruction ODE, 50 RK4 sub-steps a sample (the CPU's fused "
+                        "row equals its per-stage one: nnfmu.hybrid.fused.MAX_ODE_INSTRUCTIONS)")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--paths", nargs="+", metavar="PATH",
                    help="only these rows, by name (e.g. 'sx, eager' 'sx, fused + graphed'); the first is the base")
     args = p.parse_args()
     torch.set_num_threads(1)
     where = torch.cuda.get_device_name() if args.device.startswith("cuda") else platform.processor() or "cpu"
-    print(f"hybrid {args.physics}, batch {args.batch} x {args.steps} steps, float64, torch {torch.__version__}, {where}")
+    print(f"hybrid {args.physics}, batch {args.batch} x {args.steps} steps, float64, torch {torch.__version__}, "
+          f"{where}")
     table = paths(args.device, args.batch, args.steps, args.hidden, args.physics)
     if args.paths:
         unknown = sorted(set(args.paths) - set(table))

@@ -30,8 +30,8 @@ def slider_data():
         x = system.simulate_states([rng.uniform(-1, 1), 0.0], u[:-1])
         us.append(u)
         ys.append(x[:, :1] + 1e-3 * rng.standard_normal((200, 1)))
-    return from_arrays(Ts=system.Ts, u_train=us, y_train=ys, u_test=us[:1], y_test=ys[:1], input_names=[{"name": "F", "unit": "N"}],
-                       output_names=[{"name": "pos", "unit": "m"}])
+    return from_arrays(Ts=system.Ts, u_train=us, y_train=ys, u_test=us[:1], y_test=ys[:1],
+                       input_names=[{"name": "F", "unit": "N"}], output_names=[{"name": "pos", "unit": "m"}])
 
 
 def test_folded_sub_step_sensitivities_equal_the_unrolled_ones():

@@ -258,7 +258,8 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
               "n_sub": n_sub, "compiled": compiled, "residuals": n_r, "unknowns": problem.n_z, "cost": best.cost,
               "residual_rms": float(np.sqrt(2.0 * best.cost / n_r)), "parameters": parameters,
               "fixed": {v.name: v.start for i, v in enumerate(system.parameters) if i not in set(unknowns.index)},
-              "starts": runs, "notes": best.notes, "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled)}
+              "starts": runs, "notes": best.notes,
+              "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled)}
     report["seconds"] = round(time.perf_counter() - t0, 3)
     return GreyboxFit(system=fitted, report=report)
 

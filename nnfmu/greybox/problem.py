@@ -161,7 +161,8 @@ class Problem:
     @property
     def dense(self) -> bool:
         """Whether the Jacobian is small enough to be dense and solved exactly (by SVD): ``n_r n_z^2`` up to
-        :data:`DENSE_MAX_WORK`. The arm on 150 windows (17,100 x 1818) is above it: one SVD of it took minutes."""
+        :data:`DENSE_MAX_WORK`. The arm on 150 windows (17,100 x 1818) is above it: an SVD of it took over a
+        minute a step."""
         return self.n_r * self.n_z ** 2 <= DENSE_MAX_WORK
 
     def jacobian(self, z: np.ndarray):
