@@ -207,9 +207,10 @@ def build_problem(system: PhysicsSystem, windows: Windows, free: np.ndarray, p_f
     base[free] = 0.0
     U = ca.DM(np.concatenate([w[:-1].T for w in windows.u], axis=1))  # (n_u, n_w (L-1)), window after window
     window, window_derivatives = window_functions(system, L, n_sub, base, select)
-    plain = window.map("windows", "serial", n_w, [2], [])
-    run, derivatives = ((compile_function(f) if compile else f).map("windows", "serial", n_w, [2], [])
-                        for f in (window, window_derivatives))
+    over_windows = lambda f: f.map("windows", "serial", n_w, [2], [])  # noqa: E731
+    plain = over_windows(window)
+    run = over_windows(compile_function(window)) if compile else plain
+    derivatives = over_windows(compile_function(window_derivatives) if compile else window_derivatives)
     X0, theta = ca.MX.sym("X0", n_x, n_w), ca.MX.sym("theta", n_f)
     outputs = ca.Function("outputs", [X0, theta], [run(X0, U, theta)], ["X0", "theta"], ["Y"])
     derivatives = ca.Function("derivatives", [X0, theta], derivatives(X0, U, theta), ["X0", "theta"], ["Y", "D"])
