@@ -37,15 +37,22 @@ def _rollout_and_gradients(model, u, y, monkeypatch, fused: bool):
     return ys.detach(), [None if g is None else g.detach() for g in grads]
 
 
+@pytest.mark.parametrize("looped", [False, True], ids=["unrolled", "looped"])
 @pytest.mark.parametrize("options", [
     {**VALVE, "train": ("k_s", "C_max")},
     {**VALVE, "correction": "step", "activation": "relu", "layers": 1},
 ], ids=["derivative", "step"])
-def test_the_fused_step_equals_the_stage_by_stage_path(valve_small, options, monkeypatch):
-    """Every RK4 sub-step (the valve has 4) with the network, the physics' output and the trained parameters."""
+def test_the_fused_step_equals_the_stage_by_stage_path(valve_small, options, looped, monkeypatch):
+    """Every RK4 sub-step (the valve has 4) with the network, the physics' output and the trained parameters;
+    ``looped``: the step of physics too large to unroll (the arm's), a C loop over one SX sub-step."""
+    from nnfmu.hybrid import fused
+
     u, y = np.stack([a[:40] for a in valve_small.train.u[:3]]), np.stack([a[:40] for a in valve_small.train.y[:3]])
     model = _hybrid(valve_small, dict(options)).train()
-    assert fused_step(model) is not None
+    if looped:
+        monkeypatch.setattr(fused, "MAX_ODE_INSTRUCTIONS", 4 * model.n_sub * model.physics.ode.n_instructions() - 1)
+        assert not fused.unrolled(model) and fused.step_function(model).is_a("MXFunction")
+    assert fused_step(model, 3) is not None
     got, got_grads = _rollout_and_gradients(model, u, y, monkeypatch, fused=True)
     want, want_grads = _rollout_and_gradients(model, u, y, monkeypatch, fused=False)
     assert torch.allclose(got, want, rtol=0, atol=1e-12 * float(want.abs().max()))
@@ -57,19 +64,24 @@ def test_the_fused_step_equals_the_stage_by_stage_path(valve_small, options, mon
 
 def test_active_dropout_keeps_the_stage_by_stage_path(valve_small):
     model = _hybrid(valve_small, {**VALVE, "dropout": 0.2})
-    assert fused_step(model.train()) is None and fused_step(model.eval()) is not None
+    assert fused_step(model.train(), 3) is None and fused_step(model.eval(), 3) is not None
     sx = _hybrid(valve_small, {**VALVE, "physics_backend": "sx"})
-    assert fused_step(sx) is None
+    assert fused_step(sx, 3) is None
 
 
-def test_physics_too_large_to_unroll_keep_the_stage_by_stage_path(valve_small, monkeypatch):
+def test_physics_too_large_to_unroll_train_large_batches_stage_by_stage(valve_small, monkeypatch):
+    """The looped step costs the same per trajectory at any batch; the per-stage path is faster on large batches
+    with gradients, and much slower on one trajectory (the arm's validation run)."""
     from nnfmu.hybrid import fused
     from nnfmu.physics import arm_system
 
     assert 4 * 50 * arm_system().ode.n_instructions() > fused.MAX_ODE_INSTRUCTIONS  # the arm: 50 sub-steps
     model = _hybrid(valve_small, dict(VALVE))
     monkeypatch.setattr(fused, "MAX_ODE_INSTRUCTIONS", 4 * model.n_sub * model.physics.ode.n_instructions() - 1)
-    assert fused_step(model) is None
+    large = fused.LOOPED_MAX_BATCH + 1
+    assert fused_step(model, large) is None and fused_step(model, fused.LOOPED_MAX_BATCH) is not None
+    with torch.no_grad():
+        assert fused_step(model, large) is not None
 
 
 def test_a_large_fused_step_compiles_at_o1():

@@ -16,9 +16,12 @@ RK4 plus ``Ts * delta``), and compiles it with its reverse mode through
 ``x``, ``p`` and ``w`` by CasADi's reverse mode. The step is expanded to SX: straight-line C
 forward and reverse (an MX fold over the sub-steps compiled smaller, but its reverse mode was
 slower than the per-stage path: 13.8 against 12.4 ms per valve step). Unrolled, the arm's
-50 sub-steps of a 4208-instruction ODE would take minutes to compile, so the fused step
-applies only where ``4 n_sub`` ODE evaluations stay under :data:`MAX_ODE_INSTRUCTIONS`; larger
-physics keep the per-stage path.
+50 sub-steps of a 4208-instruction ODE would take minutes to compile, so where ``4 n_sub`` ODE
+evaluations exceed :data:`MAX_ODE_INSTRUCTIONS` the step is a C loop over one sub-step expanded to
+SX (an MX fold; 12 s to compile for the arm). Its cost is per trajectory: on one trajectory (the
+arm's validation run) it is 19 times faster than the per-stage path, whose fixed cost per stage
+spreads over a batch; with gradients on more than :data:`LOOPED_MAX_BATCH` trajectories the
+per-stage path runs.
 
 It applies (besides that size) to the ``compiled`` physics backend on the CPU without active
 dropout; the C code computes in float64 (as the physics always does). ``NNFMU_COMPILED_ROLLOUT=0`` turns it off,
@@ -43,8 +46,9 @@ from nnfmu.physics.rk4 import physics_step
 from nnfmu.training.compiled_rollout import ENV_SWITCH
 
 
-def fused_step(model) -> CompiledFunction | None:
-    """The compiled whole step of ``model`` (a HybridStepModel), or None where the per-stage path must run."""
+def fused_step(model, batch: int) -> CompiledFunction | None:
+    """The compiled whole step of ``model`` (a HybridStepModel) for ``batch`` trajectories, or None where the
+    per-stage path must run (or is faster: the looped step with gradients on large batches)."""
     config = model.config
     if os.environ.get(ENV_SWITCH, "1") == "0":
         return None
@@ -55,8 +59,8 @@ def fused_step(model) -> CompiledFunction | None:
     modules = _modules(model)
     if any(not isinstance(m, (nn.Linear, *ACTIVATIONS)) for m in modules):
         return None
-    if 4 * model.n_sub * model.physics.ode.n_instructions() > MAX_ODE_INSTRUCTIONS:
-        return None  # the unrolled step would take minutes to compile (the arm: 4208 x 200)
+    if not unrolled(model) and torch.is_grad_enabled() and batch > LOOPED_MAX_BATCH:
+        return None
     key = (config.physics_key(), config.correction, model.Ts, model.n_sub, config.n_u, _layout(modules),
            tuple(model._state_scale.tolist()), tuple(model._scatter.reshape(-1).tolist()))
     if key not in _COMPILED:  # one compiled step per layout: the model supplies the structure, not the weights
@@ -84,6 +88,11 @@ def _layout(modules) -> tuple:
 
 _COMPILED: dict[tuple, CompiledFunction | None] = {}
 MAX_ODE_INSTRUCTIONS = 50_000  # ODE instructions in one unrolled step (the valve: 253 x 16)
+#: Trajectories up to which the looped step also trains (forward and backward). Its cost is per trajectory, and the
+#: per-stage path's fixed cost per stage spreads over the batch: on the arm (hidden 32, one thread, AMD EPYC) the
+#: looped step made 95-129 trajectory-steps/s at any batch, the per-stage path 7 at batch 1, 43 at 8, 78 at 16 and
+#: 153 at 32 (benchmarks/hybrid_speed.py --physics arm). Without gradients (validation, scoring) it always runs.
+LOOPED_MAX_BATCH = 16
 
 
 def _compile(model) -> CompiledFunction | None:
@@ -95,9 +104,15 @@ def _compile(model) -> CompiledFunction | None:
         return None
 
 
+def unrolled(model) -> bool:
+    """Whether the fused step is one straight-line SX graph (else a C loop over one SX sub-step; module docstring)."""
+    return 4 * model.n_sub * model.physics.ode.n_instructions() <= MAX_ODE_INSTRUCTIONS
+
+
 def step_function(model) -> ca.Function:
     """``step(x, u, un, p, w) -> (x_next, y_next)`` of ``model`` as a CasADi Function (see the module docstring)."""
     system, config, n_x = model.physics, model.config, model.n_x
+    flat = unrolled(model)
     modules = _modules(model)
     n_w = sum(m.weight.numel() + m.bias.numel() for m in modules if isinstance(m, nn.Linear))
     x, u = ca.MX.sym("x", n_x), ca.MX.sym("u", config.n_u)
@@ -107,17 +122,30 @@ def step_function(model) -> ca.Function:
     input_term = ca.mtimes(w1[:, n_x:], un) + b1  # constant over the step's RK4 stages, as in the torch model
     delta = _delta_function(model, modules, n_w)
     if config.correction == "step":
-        x_next = physics_step(system, model.Ts, model.n_sub)(x, u, p) + model.Ts * delta(x, input_term, w)
+        rk4 = physics_step(system, model.Ts, model.n_sub) if flat else _looped_physics(system, model.Ts, model.n_sub)
+        x_next = rk4(x, u, p) + model.Ts * delta(x, input_term, w)
     else:  # n_sub RK4 sub-steps of ode + delta, as a C loop over one sub-step (fold), not n_sub copies
         h = model.Ts / model.n_sub
         c = ca.MX.sym("c", first.out_features)
         sub = ca.Function("substep", [x, u, p, c, w],
                           [rk4_step(lambda x_, u_, p_: system.ode(x_, u_, p_) + delta(x_, c, w), x, u, p, Ts=h)])
-        x_next = sub.fold(model.n_sub)(x, u, p, input_term, w)
+        x_next = (sub if flat else sub.expand()).fold(model.n_sub)(x, u, p, input_term, w)
     y_next = system.output(x_next, p)
     step = ca.Function(f"{system.name}_hybrid_step", [x, u, un, p, w], [x_next, y_next],
                        ["x", "u", "un", "p", "w"], ["x_next", "y_next"])
-    return step.expand()  # SX: its reverse mode is straight-line C (the MX fold's reverse was slower than per stage)
+    # Unrolled: SX, whose reverse mode is straight-line C (the MX fold's reverse was slower than per stage on the
+    # valve). Too large to unroll: the MX loop over one SX sub-step, which compiles in seconds.
+    return step.expand() if flat else step
+
+
+def _looped_physics(system, Ts: float, n_sub: int) -> ca.Function:
+    """``x_next = rk4(x, u, p)``: ``n_sub`` RK4 sub-steps as a C loop (fold) over one sub-step expanded to SX."""
+    x = ca.SX.sym("x", system.n_x)
+    u, p = ca.SX.sym("u", len(system.inputs)), ca.SX.sym("p", len(system.parameters))
+    sub = ca.Function("substep", [x, u, p], [rk4_step(system.ode, x, u, p, Ts=Ts / n_sub)])
+    xm = ca.MX.sym("x", system.n_x)
+    um, pm = ca.MX.sym("u", len(system.inputs)), ca.MX.sym("p", len(system.parameters))
+    return ca.Function(f"{system.name}_rk4", [xm, um, pm], [sub.fold(n_sub)(xm, um, pm)], ["x", "u", "p"], ["x_next"])
 
 
 def _linear_weights(w, at: int, layer: nn.Linear):
