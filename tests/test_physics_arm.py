@@ -155,3 +155,17 @@ def test_default_rk4_model_stays_close_to_the_exact_stiff_model():
     assert np.ptp(y_exact, axis=0).min() > 1.0  # every joint moves by more than a degree
     assert np.abs(y_rk4 - y_capped).max() < 0.01   # RK4 with 50 sub-steps: discretisation error
     assert np.abs(y_rk4 - y_exact).max() < 0.2     # the cap's effect over 4 s open loop (measured 0.07 deg)
+
+
+def test_friction_and_masses_cannot_go_negative_in_a_fit():
+    """A fit of the robot left free put two viscous frictions below zero and every free run diverged: the arm
+    declares friction, masses and inertias of the rotors non-negative, and the grey-box fit keeps them so."""
+    from nnfmu.greybox.setup import choose_unknowns
+
+    system = arm_system()
+    bounded = {v.name: v.min for v in system.parameters if v.min is not None}
+    for name in ("f_vis", "f_coul", "f_a", "f_b", "m", "J_m"):
+        assert all(bounded.get(f"{name}{j}") == 0.0 for j in range(1, 7)), name
+    assert "f_asym1" not in bounded and "rcx1" not in bounded  # offsets and positions keep their sign free
+    unknowns = choose_unknowns(system, free=["f_vis4", "f_asym4"])
+    assert unknowns.lower.tolist() == [0.0, -math.inf]

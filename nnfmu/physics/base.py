@@ -31,13 +31,17 @@ from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 __all__ = ["PhysicsSystem", "param", "parameter_variables", "unpack_parameters", "params_to_json"]
 
 
-def param(default, unit: str, description: str, *, tunable: bool = True):
+def param(default, unit: str, description: str, *, tunable: bool = True, min: float | None = None,
+          max: float | None = None):
     """A dataclass field for a physical parameter: its default, unit and one-line description.
 
     ``tunable=False`` marks structural constants (e.g. DH geometry) that are
-    baked into the ODE instead of going through its ``p`` port.
+    baked into the ODE instead of going through its ``p`` port. ``min``/``max`` bound every entry (a
+    friction coefficient: ``min=0``): the grey-box fit and a hybrid's trained parameters stay inside, and
+    the FMU declares them.
     """
-    return field(default=default, metadata={"unit": unit, "description": description, "tunable": tunable})
+    return field(default=default, metadata={"unit": unit, "description": description, "tunable": tunable,
+                                            "min": min, "max": max})
 
 
 def _tunable_fields(params) -> list[dataclasses.Field]:
@@ -50,11 +54,12 @@ def parameter_variables(params) -> tuple[Variable, ...]:
     for f in _tunable_fields(params):
         value = getattr(params, f.name)
         unit, desc = f.metadata["unit"], f.metadata["description"]
+        bounds = f.metadata.get("min"), f.metadata.get("max")
         if isinstance(value, tuple):
-            out += [Variable(f"{f.name}{j + 1}", unit, f"{desc} (joint {j + 1})", float(v))
+            out += [Variable(f"{f.name}{j + 1}", unit, f"{desc} (joint {j + 1})", float(v), *bounds)
                     for j, v in enumerate(value)]
         else:
-            out.append(Variable(f.name, unit, desc, float(value)))
+            out.append(Variable(f.name, unit, desc, float(value), *bounds))
     return tuple(out)
 
 

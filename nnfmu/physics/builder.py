@@ -117,7 +117,7 @@ class ModelBuilder:
         Returns the fields by name (a tuple field as a list of symbols, a non-tunable field as its value),
         as :func:`nnfmu.physics.unpack_parameters` does.
         """
-        symbols = {v.name: self.parameter(v.name, v.start, v.unit, v.description)
+        symbols = {v.name: self.parameter(v.name, v.start, v.unit, v.description, min=v.min, max=v.max)
                    for v in parameter_variables(params)}
         values = {}
         for f in dataclasses.fields(params):
