@@ -42,7 +42,7 @@ from nnfmu.errors import FmuBuildError
 from nnfmu.export.casadi_layers import ACTIVATIONS, activation_expr
 from nnfmu.hybrid.compiled_torch import CompiledFunction
 from nnfmu.physics import rk4_step
-from nnfmu.physics.rk4 import physics_step
+from nnfmu.physics.rk4 import physics_step, rk4_function
 from nnfmu.training.compiled_rollout import ENV_SWITCH
 
 
@@ -122,7 +122,8 @@ def step_function(model) -> ca.Function:
     input_term = ca.mtimes(w1[:, n_x:], un) + b1  # constant over the step's RK4 stages, as in the torch model
     delta = _delta_function(model, modules, n_w)
     if config.correction == "step":
-        rk4 = physics_step(system, model.Ts, model.n_sub) if flat else _looped_physics(system, model.Ts, model.n_sub)
+        rk4 = (physics_step(system, model.Ts, model.n_sub) if flat  # else a C loop over one SX sub-step
+               else rk4_function(system.ode, Ts=model.Ts, n_sub=model.n_sub, unroll_max=0, name=f"{system.name}_rk4"))
         x_next = rk4(x, u, p) + model.Ts * delta(x, input_term, w)
     else:  # n_sub RK4 sub-steps of ode + delta, as a C loop over one sub-step (fold), not n_sub copies
         h = model.Ts / model.n_sub
@@ -136,16 +137,6 @@ def step_function(model) -> ca.Function:
     # Unrolled: SX, whose reverse mode is straight-line C (the MX fold's reverse was slower than per stage on the
     # valve). Too large to unroll: the MX loop over one SX sub-step, which compiles in seconds.
     return step.expand() if flat else step
-
-
-def _looped_physics(system, Ts: float, n_sub: int) -> ca.Function:
-    """``x_next = rk4(x, u, p)``: ``n_sub`` RK4 sub-steps as a C loop (fold) over one sub-step expanded to SX."""
-    x = ca.SX.sym("x", system.n_x)
-    u, p = ca.SX.sym("u", len(system.inputs)), ca.SX.sym("p", len(system.parameters))
-    sub = ca.Function("substep", [x, u, p], [rk4_step(system.ode, x, u, p, Ts=Ts / n_sub)])
-    xm = ca.MX.sym("x", system.n_x)
-    um, pm = ca.MX.sym("u", len(system.inputs)), ca.MX.sym("p", len(system.parameters))
-    return ca.Function(f"{system.name}_rk4", [xm, um, pm], [sub.fold(n_sub)(xm, um, pm)], ["x", "u", "p"], ["x_next"])
 
 
 def _linear_weights(w, at: int, layer: nn.Linear):

@@ -193,17 +193,17 @@ class HybridStepModel(StepModel):
                      for v, value in zip(self.physics.parameters, values))
 
     # ---- the correction ---------------------------------------------------------------------
-    def _plan(self, dtype: torch.dtype, fused: int = 0) -> "_Plan":
+    def _plan(self, dtype: torch.dtype, fused_batch: int = 0) -> "_Plan":
         """The correction's weights and constants for one rollout (views of the parameters, no copies).
 
-        With ``fused`` (the batch size, 0 for none), also the whole step as one compiled call where it applies
+        With ``fused_batch`` (the batch size; 0: none), also the whole step as one compiled call where it applies
         (:mod:`nnfmu.hybrid.fused`)
         and its input ``w``, the weights concatenated into one vector (a copy, differentiable).
         """
         layers = list(self.correction)
         first, n_x = layers[0], self.n_x
         rest = [m for m in layers[1:] if not (type(m) is nn.Dropout and not (self.training and m.p > 0))]
-        step = fused_step(self, fused) if fused else None
+        step = fused_step(self, fused_batch) if fused_batch else None
         return _Plan(first.weight[:, :n_x], first.weight[:, n_x:], first.bias, rest,
                      self._state_scale.to(dtype), self._scatter.to(dtype), step,
                      None if step is None else weight_vector(self))
@@ -257,7 +257,7 @@ class HybridStepModel(StepModel):
 
     def _free_run_eager(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
         """:meth:`_free_run_norm` without the check (what :mod:`nnfmu.hybrid.graphed` records on a GPU)."""
-        p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused=yn0.shape[0])
+        p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused_batch=yn0.shape[0])
         x = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0].to(yn0.dtype)
         ys = [yn0]
         for k in range(un.shape[1] - 1):
