@@ -87,7 +87,7 @@ def test_the_table_has_a_row_per_trial_and_marks_the_kept_one(capsys):
             {"trial": 1, "arch": "tcn", "hidden": 16, "lr": 1e-2, "feedback_noise": 0.1, "truncate": 400,
              "epochs": 0, "best_valid_nrmse": None, "stopped": False, "cpu_s": None, "status": "diverged",
              "error": "the training loss became nan"}]
-    print_table(rows, best=0)
+    print_table(rows, kept=(0,))
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split()[:4] == ["trial", "arch", "hidden", "lr"]
     assert lines[1].split()[:2] == ["0*", "gru"] and "0.2500" in lines[1] and "12.5" in lines[1]
@@ -160,17 +160,19 @@ def test_a_search_in_a_local_loopback_ray_keeps_the_best_trial(tmp_path, capsys,
     assert len(rows) >= 2 and [r["trial"] for r in rows] == list(range(len(rows)))
     scored = [r["best_valid_nrmse"] for r in rows if r["best_valid_nrmse"] is not None]
     ckpt = load_checkpoint(out)
-    assert ckpt["summary"]["best_valid_nrmse"] == min(scored) == result.best_valid_nrmse
-    kept = rows[result.best]
-    assert ckpt["model_config"]["arch"] == kept["arch"] and ckpt["model_config"]["hidden"] == kept["hidden"]
-    assert ckpt["train_config"]["lr"] == kept["lr"] and ckpt["summary"]["search"]["trials"] == len(rows)
+    assert result.best_valid_nrmse == ckpt["summary"]["best_valid_nrmse"] <= min(scored)
+    assert rows[result.best]["best_valid_nrmse"] == min(scored) and result.members[0] == result.best
+    members = [rows[i] for i in result.members]  # the best trial alone, or the ensemble that beat it on validation
+    configs = ckpt["model_config"]["member_configs"] or [ckpt["model_config"]]
+    assert [(c["arch"], c["hidden"]) for c in configs] == [(r["arch"], r["hidden"]) for r in members]
+    assert ckpt["summary"]["search"]["trials"] == len(rows)
     assert ckpt["summary"]["test_nrmse"] == pytest.approx(result.test.mean)
     printed = capsys.readouterr().out
     table = _table(printed)
     assert [row[0].rstrip("*") for row in table] == [str(r["trial"]) for r in rows]  # every trial, one row each
-    assert [row[0] for row in table].count(f"{result.best}*") == 1
+    assert sorted(row[0] for row in table if row[0].endswith("*")) == sorted(f"{i}*" for i in result.members)
     assert re.search(rf"test free-run NRMSE: {result.test.mean:.4f} ", printed)
-    assert f"validation free-run NRMSE {min(scored):.4f}; checkpoint {out}" in printed
+    assert f"validation free-run NRMSE {result.best_valid_nrmse:.4f}" in printed
 
 
 @pytest.mark.parametrize("finished", [True, False])
@@ -206,7 +208,8 @@ def test_an_interrupted_search_keeps_the_best_finished_trial_or_nothing(finished
                                progress=False)
     assert out.exists() is finished
     if finished:
-        assert load_checkpoint(out)["summary"]["search"] == {"trials": 2, "kept": 0}
+        search = load_checkpoint(out)["summary"]["search"]
+        assert (search["trials"], search["kept"], search["members"]) == (2, 0, [0])  # no selection once stopped
         assert "search stopped (KeyboardInterrupt): the best trial so far, 0" in capsys.readouterr().out
 
 
@@ -220,3 +223,48 @@ def test_without_ray_max_minutes_alone_trains_one_network_after_a_note(monkeypat
     assert not applies(_args()) and not applies(_args())
     printed = capsys.readouterr().out
     assert printed.count('searches with Ray Tune, which is not installed (pip install "nnfmu[tune]")') == 1
+
+
+def test_the_search_keeps_an_ensemble_of_trials_only_when_it_beats_the_best_on_validation(tmp_path, capsys):
+    """Three finished trials: two whose errors cancel (their linear path's output offset moved by +-0.3 output
+    standard deviations) and a copy of the better one. The kept model is the ensemble of the two, written as one
+    checkpoint that loads, exports and reports what it is; without the second one, the best trial alone."""
+    import torch
+
+    from nnfmu.models import save_checkpoint
+    from nnfmu.study.time_search import _keep
+    from tests.test_linear_path import path_model
+
+    ds = dataset(true_system(), noise=0.01)
+    from nnfmu.linear import identify_linear
+
+    linear = identify_linear(ds)
+    rows = []
+    for i, (arch, shift) in enumerate((("gru", 0.3), ("mlp", 0.3), ("tcn", -0.32))):
+        model = path_model(arch, ds, linear)
+        with torch.no_grad():
+            model.lin_d.add_(shift)
+        save_checkpoint(tmp_path / f"trial-{i}.pt", model, train_config=TrainConfig().to_dict(), best_epoch=5,
+                        summary={"best_valid_nrmse": 0.5 + 0.01 * i, "epochs_run": 9})
+        rows.append({"trial": i, "arch": arch, "hidden": 8, "lr": 3e-3, "feedback_noise": 0.0, "truncate": None,
+                     "epochs": 9, "best_valid_nrmse": 0.5 + 0.01 * i, "stopped": False, "cpu_s": 1.0,
+                     "status": "time-budget", "error": None})
+    kept = _keep(rows, tmp_path, ds, tmp_path / "kept.pt", deadline=time.monotonic() + 600)
+    assert kept.best == 0 and kept.members == (0, 2) and kept.member_scores[1] < 0.5 * kept.member_scores[0]
+    ckpt = load_checkpoint(tmp_path / "kept.pt")
+    assert [c["arch"] for c in ckpt["model_config"]["member_configs"]] == ["gru", "tcn"]
+    assert ckpt["summary"]["search"]["members"] == [0, 2] and ckpt["summary"]["best_valid_nrmse"] < 0.1
+    from nnfmu.export import casadi_model
+    from nnfmu.models import load_model
+
+    ensemble = load_model(tmp_path / "kept.pt").double()
+    u, y = ds.test.u[0], ds.test.y[0]
+    assert abs(casadi_model(ensemble).simulate(u, y[0]) - ensemble.simulate(u, y[0])).max() < 1e-9
+    print_table(rows, kept.members)
+    assert [line.split()[0] for line in capsys.readouterr().out.splitlines()[1:4]] == ["0*", "1", "2*"]
+
+    (tmp_path / "trial-2.pt").unlink()
+    rows[2]["best_valid_nrmse"] = None
+    alone = _keep(rows, tmp_path, ds, tmp_path / "kept.pt", deadline=time.monotonic() + 600)
+    assert alone.members == (0,) and alone.best_valid_nrmse == 0.5 and "lowered" in alone.selection
+    assert load_checkpoint(tmp_path / "kept.pt")["model_config"]["member_configs"] == ()

@@ -73,15 +73,22 @@ def run_search(args: argparse.Namespace, ds, model_config, train_config, out, de
     result = search_for(ds, minutes, model_config=model_config, train_config=train_config, linear=linear,
                         out=out, given=fixed, seed=train_config.seed, progress=not args.quiet,
                         since=getattr(args, "started", None))
-    print_table(result.rows, result.best)
+    print_table(result.rows, result.members)
     if result.best is None:
         raise TrainingError(f"no trial of the search finished an epoch in {minutes:g} minutes (starting Ray and "
                             "its workers takes up to half a minute); give a larger --max-minutes, or --epochs N "
                             "for one plain training")
-    kept = result.rows[result.best]
-    print(f"kept trial {result.best} ({kept['arch']}, hidden {kept['hidden']}, lr {kept['lr']:g}, feedback noise "
-          f"{kept['feedback_noise']:g}, {_window(kept['truncate'])}): validation free-run NRMSE "
-          f"{result.best_valid_nrmse:.4f}; checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)")
+    if len(result.members) > 1:
+        scores = ", ".join(f"{v:.4f}" for v in result.member_scores)
+        print(f"kept an ensemble of trials {', '.join(map(str, result.members))} (the mean output fed back, one "
+              f"model): validation free-run NRMSE {result.best_valid_nrmse:.4f} (as each joined: {scores}; "
+              f"stopped: {result.selection}); checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)")
+    else:
+        kept = result.rows[result.best]
+        print(f"kept trial {result.best} ({kept['arch']}, hidden {kept['hidden']}, lr {kept['lr']:g}, feedback "
+              f"noise {kept['feedback_noise']:g}, {_window(kept['truncate'])}): validation free-run NRMSE "
+              f"{result.best_valid_nrmse:.4f}; checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)"
+              + (f"; no ensemble: {result.selection}" if result.selection else ""))
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
@@ -99,12 +106,16 @@ def _cell(value, fmt: str) -> str:
     return format(value, fmt)
 
 
-def print_table(rows: list, best: int | None) -> None:
-    """One row per trial: its settings, epochs run, best validation NRMSE, ASHA's stop, CPU seconds, how it ended."""
+def print_table(rows: list, kept=()) -> None:
+    """One row per trial: its settings, epochs run, best validation NRMSE, ASHA's stop, CPU seconds, how it ended.
+
+    ``kept``: the trials of the kept model (one, or an ensemble's), starred.
+    """
+    kept = tuple(kept)
     head = ("trial", "arch", "hidden", "lr", "noise", "window", "epochs", "valid NRMSE", "ASHA", "CPU-s", "end")
     table = [head]
     for r in rows:
-        table.append((f"{r['trial']}{'*' if r['trial'] == best else ''}", r["arch"], str(r["hidden"]),
+        table.append((f"{r['trial']}{'*' if r['trial'] in kept else ''}", r["arch"], str(r["hidden"]),
                       f"{r['lr']:g}", f"{r['feedback_noise']:g}", "whole" if r["truncate"] is None else
                       str(r["truncate"]), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
                       "stopped" if r["stopped"] else "-", _cell(r["cpu_s"], ".1f"),
@@ -113,5 +124,7 @@ def print_table(rows: list, best: int | None) -> None:
     for row in table:
         print("  ".join(cell.rjust(w) if j else cell.ljust(w) for j, (cell, w) in enumerate(zip(row, widths)))
               + "  " + row[-1])
-    if best is not None:
+    if len(kept) == 1:
         print("* kept: the lowest validation free-run NRMSE")
+    elif kept:
+        print("* kept: their ensemble, chosen greedily on validation from the best trial on")

@@ -223,11 +223,19 @@ def casadi_model(model: StepModel, *, name: str | None = None) -> CasadiModel:
         Ts=float(meta["Ts"]),
         inputs=stored_input_variables(meta, model.u_mean, model.u_std),  # with the valid range
         outputs=with_starts([Variable(**ch) for ch in channels], model.y_mean),  # y0: the training mean
-        description=f"{model.config.arch.upper()} network exported by nnfmu",
+        description=f"{_what(model)} exported by nnfmu",
         source=_provenance(model),
         init_window=model.config.init_window,
     )
     return CasadiModel(init, step, spec)
+
+
+def _what(model: StepModel) -> str:
+    """``GRU network``, or for an ensemble ``ensemble of 3 networks (LSTM, RNN, LSTM), mean fed back``."""
+    if isinstance(model, EnsembleStepModel):
+        archs = ", ".join(m.config.arch.upper() for m in model.members)
+        return f"ensemble of {len(model.members)} networks ({archs}), mean fed back"
+    return f"{model.config.arch.upper()} network"
 
 
 def _provenance(model: StepModel) -> dict:

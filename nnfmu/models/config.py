@@ -24,6 +24,8 @@ RNN_ACTIVATIONS = ("tanh", "relu")
 # Per-architecture defaults for the options left as None.
 _DEFAULT_LAYERS = {"mlp": 2, "rnn": 1, "lstm": 1, "gru": 1, "tcn": 3}
 _DEFAULT_MLP_WINDOW = 4
+# What the members of one ensemble share: their ports, the window their init sees, their linear path, their mode.
+MEMBER_SHARED = ("n_u", "n_y", "init_window", "linear_order", "increment")
 
 
 def tcn_receptive_field(layers: int, kernel_size: int) -> int:
@@ -76,6 +78,11 @@ class ModelConfig:
         1: one network. K > 1: an ensemble of K networks of this config (trained with different
         seeds, :func:`nnfmu.training.train_seeds`) whose mean output is fed back to all of them as
         the one prediction (:mod:`nnfmu.models.ensemble`).
+    member_configs : tuple of dict
+        Empty: every member of an ensemble is this config with ``members=1``. Otherwise a *mixed*
+        ensemble (the time-budget search keeps one): the K members' own configs (:meth:`to_dict`),
+        each a single network with this config's ``n_u``, ``n_y``, ``init_window``, ``linear_order``
+        and ``increment``; the other fields here are the first member's.
     linear_order : int
         0: the network alone. ``n_z > 0``: the network as a zero-initialised correction on a linear path
         of ``n_z`` states, started at the identified linear baseline (:mod:`nnfmu.models.linear_path`);
@@ -100,6 +107,7 @@ class ModelConfig:
     init_window: int = 1
     encoder_hidden: int = 64
     members: int = 1
+    member_configs: tuple = dataclasses.field(default=(), hash=False)
     linear_order: int = 0
 
     def __post_init__(self) -> None:
@@ -108,6 +116,7 @@ class ModelConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ShapeError(f"ModelConfig.{name} must be a positive integer, got {value!r}")
+        self._check_member_configs()
         if not isinstance(self.linear_order, int) or isinstance(self.linear_order, bool) or self.linear_order < 0:
             raise ShapeError(f"ModelConfig.linear_order must be an integer >= 0, got {self.linear_order!r}")
         if self.linear_order and self.increment:
@@ -133,6 +142,28 @@ class ModelConfig:
         if self.activation not in valid_act:
             raise ConfigError(f"activation {self.activation!r} is not available for arch {self.arch!r}; "
                               f"choose one of {', '.join(valid_act)}")
+
+    def _check_member_configs(self) -> None:
+        """``member_configs`` as a tuple of dicts, one per member, that agree with this config on what they share."""
+        configs = self.member_configs
+        if not configs:
+            object.__setattr__(self, "member_configs", ())
+            return
+        if not isinstance(configs, (list, tuple)) or not all(isinstance(d, Mapping) for d in configs):
+            raise ShapeError("ModelConfig.member_configs must be a sequence of member config dicts")
+        configs = tuple(dict(d) for d in configs)
+        if len(configs) != self.members:
+            raise ShapeError(f"ModelConfig.member_configs has {len(configs)} configs for members={self.members}")
+        for i, d in enumerate(configs):
+            if d.get("members", 1) != 1 or d.get("member_configs"):
+                raise ShapeError(f"member {i} of an ensemble must be one network (members=1), got {d.get('members')}")
+            for name in MEMBER_SHARED:
+                default = next(f.default for f in dataclasses.fields(ModelConfig) if f.name == name)
+                if d.get(name, default) != getattr(self, name):
+                    raise ShapeError(f"member {i} of an ensemble has {name}={d.get(name, default)!r}, the ensemble "
+                                     f"{getattr(self, name)!r}: the members of one model share "
+                                     f"{', '.join(MEMBER_SHARED)}")
+        object.__setattr__(self, "member_configs", configs)
 
     # ---- what a subclass of another architecture overrides (a plugin's config, docs/design.md) -------------
     def _check_arch(self) -> None:

@@ -11,6 +11,11 @@ newest output (the one prediction of the free run)::
 Averaging seeds removes much of the seed-to-seed variance of small-data training; feeding the
 mean back (instead of running K free runs and averaging them afterwards) keeps it one model with
 one state, so it exports as one FMU. The members share the normalisation of their training split.
+
+The members are K networks of one config (seeds: :func:`nnfmu.training.train_seeds`) or, in a *mixed*
+ensemble (``ModelConfig.member_configs``; the time-budget search keeps one), networks of different
+architectures and widths that share their ports, init window, linear path and mode
+(:data:`nnfmu.models.config.MEMBER_SHARED`).
 """
 
 from __future__ import annotations
@@ -23,8 +28,15 @@ from torch import nn
 from nnfmu.errors import ShapeError
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import ModelConfig
+from nnfmu.models.config import MEMBER_SHARED, ModelConfig
 from nnfmu.models.linear_path import LinearPathStepModel
+
+
+def member_configs(config: ModelConfig) -> list[ModelConfig]:
+    """The configs of an ensemble's members: its ``member_configs``, or itself with ``members=1``, K times."""
+    if config.member_configs:
+        return [ModelConfig.from_dict(d) for d in config.member_configs]
+    return [config.replace(members=1)] * config.members
 
 
 def single_model_class(config: ModelConfig) -> type:
@@ -38,27 +50,40 @@ def single_model_class(config: ModelConfig) -> type:
 
 
 class EnsembleStepModel(StepModel):
-    """``config.members`` networks of ``config.replace(members=1)``; see the module docstring."""
+    """``config.members`` networks: ``config.member_configs``, or ``config.replace(members=1)`` each (module doc)."""
 
     def __init__(self, config: ModelConfig, meta: Mapping | None = None):
         super().__init__(config, meta)
         if config.members < 2:
             raise ShapeError(f"an ensemble needs members >= 2, got {config.members}; build a single network instead")
-        member = config.replace(members=1)
-        cls = single_model_class(member)
-        self.members = nn.ModuleList(cls(member, meta) for _ in range(config.members))
+        configs = member_configs(config)
+        self.members = nn.ModuleList(single_model_class(c)(c, meta) for c in configs)
         self._check_sizes()
 
     @classmethod
     def from_members(cls, models: Sequence[StepModel]) -> "EnsembleStepModel":
-        """The ensemble of trained networks of one config, meta and normalisation (weights copied)."""
+        """The ensemble of trained networks of one meta and normalisation (weights copied).
+
+        Networks of one config make a plain ensemble; networks of different configs a mixed one, when they
+        share :data:`~nnfmu.models.config.MEMBER_SHARED`.
+        """
+        if len(models) < 2:
+            raise ShapeError("an ensemble needs at least 2 trained networks")
         first = models[0]
-        if len(models) < 2 or any(m.config != first.config for m in models):
-            raise ShapeError("an ensemble needs at least 2 trained networks of the same config")
+        for m in models:
+            if m.config.members != 1:
+                raise ShapeError("an ensemble's members are single networks, not ensembles")
+            for name in MEMBER_SHARED:
+                if getattr(m.config, name) != getattr(first.config, name):
+                    raise ShapeError(f"the networks differ in {name} ({getattr(first.config, name)!r} and "
+                                     f"{getattr(m.config, name)!r}); the members of one ensemble share it")
         for name in ("u_mean", "u_std", "y_mean", "y_std"):
             if any(not torch.equal(getattr(m, name), getattr(first, name)) for m in models):
                 raise ShapeError(f"the networks have different normalisation ({name}); train them on the same data")
-        ensemble = cls(first.config.replace(members=len(models)), first.meta).to(first.u_mean.dtype)
+        mixed = any(m.config != first.config for m in models)
+        config = first.config.replace(members=len(models),
+                                      member_configs=tuple(m.config.to_dict() for m in models) if mixed else ())
+        ensemble = cls(config, first.meta).to(first.u_mean.dtype)
         for target, source in zip(ensemble.members, models):
             target.load_state_dict(source.state_dict())
         for name in ("u_mean", "u_std", "y_mean", "y_std"):

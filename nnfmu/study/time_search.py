@@ -16,14 +16,20 @@ period: :data:`GRACE_STEPS` optimiser steps, at least 3 epochs). The whole searc
 - no trial starts once less than a quarter of a cap (or :data:`MIN_TRIAL_S`) is left; a trial stops after
   an epoch when the next would end past the end; Tune's own time budget stops whatever still runs then.
 
-The trials validate on the validation split only (the test split stays in the driver); the trial with the
-lowest best validation NRMSE kept in its checkpoint wins, and its checkpoint, with its test scores added,
-is written atomically to ``out``. Nothing is written to ``out`` unless a trial finished an epoch.
+The trials validate on the validation split only (the test split stays in the driver). The trial with the
+lowest best validation NRMSE kept in its checkpoint starts a greedy ensemble selection on validation
+(:func:`nnfmu.training.ensemble_select.select_ensemble`) over the :data:`MAX_CANDIDATES` best trials that
+improved on their start: another trial joins as a member of one model (the mean output fed back) only if it
+lowers the validation free-run NRMSE by 1 % or more, up to 4 members. :data:`SELECT_SHARE` of the budget is
+kept for it, ending early enough to score the kept model on the test split in time. The kept model (one
+trial's network, or the mixed ensemble of several), with its test scores added, is written atomically to
+``out``. Nothing is written to ``out`` unless a trial finished an epoch.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import math
@@ -51,6 +57,8 @@ MAX_TRIALS = 24  # planned: what sets each trial's cap
 MAX_POINTS = 4 * MAX_TRIALS  # run while time is left (the robot's 24 planned trials ended in 435 of its 600 s)
 MIN_TRIAL_S = 5.0
 GRACE_STEPS = 20
+SELECT_SHARE = 0.1  # of the budget, kept for the ensemble selection after the trials
+MAX_CANDIDATES = 6  # the best trials on validation that the selection tries
 THREAD_TIMEOUT_S = 60
 
 
@@ -60,10 +68,12 @@ class TimeSearchResult:
 
     A row: ``trial``, the knobs (``arch``, ``hidden``, ``lr``, ``feedback_noise``, ``truncate``), ``epochs``
     (run), ``best_valid_nrmse`` (kept in its checkpoint; None if it never finished an epoch), ``stopped``
-    (by ASHA), ``cpu_s`` (CPU seconds of its worker), ``status`` (how it ended) and ``error``. ``test`` and
-    ``test_window``: the kept model's free-run test scores (:class:`~nnfmu.metrics.NrmseResult` or None), as
-    :class:`~nnfmu.training.TrainResult` has them; ``model_config`` and ``train_config``: the kept trial's,
-    as its checkpoint holds them (dicts).
+    (by ASHA), ``cpu_s`` (CPU seconds of its worker), ``status`` (how it ended) and ``error``. ``best``: the
+    trial best on validation; ``members``: the trials of the kept model (``(best,)``, or the ensemble's, in the
+    order the selection added them) and ``member_scores`` the validation NRMSE after each addition;
+    ``best_valid_nrmse``: the kept model's. ``test`` and ``test_window``: the kept model's free-run test scores
+    (:class:`~nnfmu.metrics.NrmseResult` or None), as :class:`~nnfmu.training.TrainResult` has them;
+    ``model_config`` and ``train_config``: the kept model's, as its checkpoint holds them (dicts).
     """
 
     rows: list = field(default_factory=list)
@@ -75,6 +85,9 @@ class TimeSearchResult:
     train_config: dict | None = None
     test: object = None
     test_window: object = None
+    members: tuple = ()
+    member_scores: tuple = ()
+    selection: str = ""
 
 
 def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: TrainConfig, linear=None,
@@ -105,7 +118,8 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     cpus = max(1, int(cpus or len(os.sched_getaffinity(0))))
     out, given = Path(out), set(given)
     reserve = max(MIN_RESERVE_S, END_RESERVE * 60.0 * minutes)
-    end = started + 60.0 * minutes - reserve
+    final = started + 60.0 * minutes
+    end = final - reserve - SELECT_SHARE * 60.0 * minutes
     train_config = _resolved(dataset, train_config)
     trials_ds = dataset.replace(splits={k: v for k, v in dataset.splits.items() if k != "test"})
     steps = _steps_per_epoch(trials_ds, train_config)
@@ -138,16 +152,16 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
             stopped_by = exc
         rows = [_row(i, p, Path(tmp), i in scheduler.stopped_points, scheduler.last.get(i, {}))
                 for i, p in enumerate(points) if i < searcher.next]
-        best, test, test_window, ckpt = _keep(rows, Path(tmp), dataset, out)
+        kept = _keep(rows, Path(tmp), dataset, out, None if stopped_by is not None else final - reserve / 2)
         if stopped_by is not None:
-            if best is not None:
-                print(f"search stopped ({type(stopped_by).__name__}): the best trial so far, {best}, validation "
-                      f"free-run NRMSE {rows[best]['best_valid_nrmse']:.4f}, is kept in {out}", flush=True)
+            if kept is not None:
+                print(f"search stopped ({type(stopped_by).__name__}): the best trial so far, {kept.best}, "
+                      f"validation free-run NRMSE {kept.best_valid_nrmse:.4f}, is kept in {out}", flush=True)
             raise stopped_by
-    return TimeSearchResult(rows, best, math.inf if best is None else rows[best]["best_valid_nrmse"],
-                            None if best is None else out, time.monotonic() - started,
-                            None if ckpt is None else ckpt["model_config"],
-                            None if ckpt is None else ckpt["train_config"], test, test_window)
+    seconds = time.monotonic() - started
+    if kept is None:
+        return TimeSearchResult(rows, seconds=seconds)
+    return dataclasses.replace(kept, rows=rows, seconds=seconds)
 
 
 @contextlib.contextmanager
@@ -251,10 +265,11 @@ def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
     return row
 
 
-def _keep(rows: list, folder: Path, dataset: Dataset, out: Path) -> tuple:
-    """Write the best trial's checkpoint, with its test scores, atomically to ``out``.
+def _keep(rows: list, folder: Path, dataset: Dataset, out: Path, deadline: float | None) -> TimeSearchResult | None:
+    """Select the kept model (module docstring) and write it, with its test scores, atomically to ``out``.
 
-    Returns ``(index, test, test_window, checkpoint dict)``, all None when no trial finished an epoch.
+    ``deadline``: the :func:`time.monotonic` time by which the test scores are written (None: keep the best trial
+    alone, without a selection: the search was stopped). None when no trial finished an epoch.
     """
     import io
 
@@ -262,19 +277,66 @@ def _keep(rows: list, folder: Path, dataset: Dataset, out: Path) -> tuple:
 
     from nnfmu.atomic import write_atomic
     from nnfmu.models import load_checkpoint, model_from_checkpoint
+    from nnfmu.models.checkpoint import state_snapshot
     from nnfmu.training.trainer import _test_scores
 
-    scored = [r for r in rows if r["best_valid_nrmse"] is not None]
+    scored = sorted((r for r in rows if r["best_valid_nrmse"] is not None),
+                    key=lambda r: (r["best_valid_nrmse"], r["trial"]))
     if not scored:
-        return None, None, None, None
-    best = min(scored, key=lambda r: (r["best_valid_nrmse"], r["trial"]))["trial"]
+        return None
+    best = scored[0]["trial"]
     ckpt = load_checkpoint(folder / f"trial-{best}.pt")
-    test, window = _test_scores(model_from_checkpoint(ckpt), dataset)
+    model, members, scores, why = model_from_checkpoint(ckpt), (best,), (scored[0]["best_valid_nrmse"],), ""
+    if deadline is not None:
+        model, members, scores, why = _select(scored, folder, dataset, ckpt, model, deadline)
+        if len(members) == 1:  # the trial alone: its score as its training kept it, the table's
+            scores = (scored[0]["best_valid_nrmse"],)
+    test, window = _test_scores(model, dataset)
+    search = {"trials": len(rows), "kept": best, "members": list(members), "member_valid_nrmse": list(scores),
+              "selection": why}
+    if len(members) > 1:
+        summary = {"best_valid_nrmse": scores[-1], "stop_reason": "search", "search": search,
+                   "notes": [f"an ensemble of trials {', '.join(map(str, members))} of the time-budget search, "
+                             f"chosen greedily on validation ({why})"]}
+        ckpt = {**ckpt, "model_config": model.config.to_dict(), "state_dict": state_snapshot(model),
+                "history": [], "best_epoch": None, "resume": None, "summary": summary}
+    else:
+        ckpt["summary"].update(search=search)
     ckpt["summary"].update(test_nrmse=None if test is None else test.mean,
-                           test_nrmse_window=None if window is None else window.mean,
-                           search={"trials": len(rows), "kept": best})
+                           test_nrmse_window=None if window is None else window.mean)
     buffer = io.BytesIO()
     torch.save(ckpt, buffer)
     write_atomic(out, lambda tmp: tmp.write_bytes(buffer.getbuffer()))
-    return best, test, window, ckpt
+    return TimeSearchResult(best=best, best_valid_nrmse=scores[-1], out=out, model_config=ckpt["model_config"],
+                            train_config=ckpt["train_config"], test=test, test_window=window, members=members,
+                            member_scores=scores, selection=why)
 
+
+def _select(scored: list, folder: Path, dataset: Dataset, ckpt: dict, model, deadline: float) -> tuple:
+    """``(model, member trials, validation NRMSE after each, why it ended)`` of the greedy selection.
+
+    The candidates: the best trial and the next best that improved on their start (best epoch > 0), up to
+    :data:`MAX_CANDIDATES`. The selection stops early enough to score the kept model on the test split by
+    ``deadline``.
+    """
+    from nnfmu.models import load_checkpoint, model_from_checkpoint
+    from nnfmu.training.ensemble_select import select_ensemble
+    from nnfmu.training.horizons import validation_trajectories
+
+    trials, models = [scored[0]["trial"]], [model]
+    for r in scored[1:]:
+        if len(trials) == MAX_CANDIDATES:
+            break
+        other = load_checkpoint(folder / f"trial-{r['trial']}.pt")
+        if (other.get("best_epoch") or 0) > 0:
+            trials.append(r["trial"])
+            models.append(model_from_checkpoint(other))
+    if len(models) == 1:
+        return model, tuple(trials), (scored[0]["best_valid_nrmse"],), "one trial improved on its start"
+    valid, _ = validation_trajectories(dataset, TrainConfig.from_dict(ckpt["train_config"]))
+    test_share = dataset.test.n_samples / valid.n_samples if "test" in dataset.splits else 0.0
+    # the test is scored twice (from y0, and after the init window), in float64: about 2 free runs per sample
+    selection = select_ensemble(models, valid, context=model.config.init_window, deadline=deadline,
+                                after=2.0 * (2 if model.config.init_window > 1 else 1) * test_share)
+    return (selection.model, tuple(trials[i] for i in selection.chosen), tuple(selection.scores),
+            selection.stopped)

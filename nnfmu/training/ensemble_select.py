@@ -1,0 +1,95 @@
+"""Greedy ensemble selection on validation: which trained networks to average, and whether to average at all.
+
+Forward selection (Caruana et al., "Ensemble selection from libraries of models", ICML 2004), without
+replacement: start from the best network on validation alone; in each round, try each remaining
+candidate as one more member of the ensemble (:class:`~nnfmu.models.EnsembleStepModel`: the mean output
+fed back, as the FMU runs it) and add the one whose ensemble has the lowest validation free-run NRMSE,
+if that is at least :data:`MIN_GAIN` (relative) below the current one. It stops at :data:`MAX_MEMBERS`,
+when no candidate gains enough, or at ``deadline``. Each member must pay for itself: an FMU of K members
+costs K times one network's step.
+
+The candidates are ranked by the caller (best on validation first), and should exclude networks that
+never improved on their start (they pull the mean back towards it). Every number here is a validation
+score; the test split is not seen.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import torch
+
+from nnfmu.data import Trajectories
+from nnfmu.models import EnsembleStepModel, StepModel
+from nnfmu.training.evaluate import free_run_nrmse
+
+MAX_MEMBERS = 4
+MIN_GAIN = 0.01  # relative fall of the validation NRMSE that one more member must bring
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The kept model and how it was chosen.
+
+    ``chosen``: indices into the candidates, in the order added (``chosen[0] == 0``); ``scores``: the
+    validation free-run NRMSE after each addition (``scores[0]``: the best candidate alone), so
+    ``scores[-1]`` is ``model``'s; ``stopped``: why the selection ended.
+    """
+
+    model: StepModel
+    chosen: list = field(default_factory=list)
+    scores: list = field(default_factory=list)
+    stopped: str = ""
+
+
+def _score(models: Sequence[StepModel], valid: Trajectories, context: int) -> float:
+    model = models[0] if len(models) == 1 else EnsembleStepModel.from_members(list(models)).eval()
+    with torch.no_grad():
+        result = free_run_nrmse(model, valid, context=context)
+    return float("inf") if result is None else float(result.mean)
+
+
+def select_ensemble(candidates: Sequence[StepModel], valid: Trajectories, *, context: int = 1,
+                    deadline: float | None = None, after: float = 0.0, max_members: int = MAX_MEMBERS,
+                    min_gain: float = MIN_GAIN) -> Selection:
+    """The greedy ensemble of ``candidates`` (best on validation first) on the ``valid`` free runs.
+
+    ``context``: as in :func:`~nnfmu.training.evaluate.free_run_nrmse` (the models' ``init_window``).
+    ``deadline``: a :func:`time.monotonic` time by which the selection and the caller's work with the kept model
+    (scoring the test: ``after`` validation free runs of each of its members) are done. An ensemble of K members
+    is taken to cost K times the first candidate's validation free run; one that would not end in time is not
+    scored, and the best so far is kept. One candidate, or ``max_members`` 1, keeps ``candidates[0]``.
+    """
+    candidates = [m.eval() for m in candidates]
+    started = time.monotonic()
+    chosen, scores = [0], [_score(candidates[:1], valid, context)]
+    one = time.monotonic() - started  # seconds of one member's validation free run
+
+    def in_time(k: int) -> bool:
+        return deadline is None or time.monotonic() + k * one * (1.0 + after) <= deadline
+
+    while True:
+        if len(chosen) == len(candidates):
+            stopped = "every candidate is in"
+            break
+        if len(chosen) >= max_members:
+            stopped = f"{max_members} members"
+            break
+        tried, late = {}, False
+        for i in (i for i in range(len(candidates)) if i not in chosen):
+            if not in_time(len(chosen) + 1):
+                late = True
+                break
+            tried[i] = _score([candidates[j] for j in chosen + [i]], valid, context)
+        best = min(tried, key=tried.get, default=None)
+        if best is not None and tried[best] <= scores[-1] * (1.0 - min_gain):
+            chosen.append(best)
+            scores.append(tried[best])
+            if not late:
+                continue
+        stopped = "the time was up" if late else f"no member lowered the validation NRMSE by {100 * min_gain:g} %"
+        break
+    model = candidates[0] if len(chosen) == 1 else EnsembleStepModel.from_members([candidates[i] for i in chosen])
+    return Selection(model.eval(), chosen, scores, stopped)
