@@ -52,6 +52,10 @@ def test_a_mixed_ensemble_is_its_members_mean_fed_back_in_torch_casadi_and_the_f
     save_checkpoint(tmp_path / "e.pt", ensemble)
     loaded = load_model(tmp_path / "e.pt").double()  # a checkpoint loads in float32, as trained
     assert [m.config.arch for m in loaded.members] == ["gru", "tcn", "mlp"]
+    from nnfmu.cli.info import describe
+
+    assert describe(tmp_path / "e.pt")["model_config"]["member_configs"] == [
+        "gru hidden 8 layers 1", "tcn hidden 8 layers 3", "mlp hidden 8 layers 2"]  # nnfmu info: each in a few words
     stored = copy.deepcopy(ensemble).float().double()
     assert rel(loaded.simulate(u, y[0]), stored.simulate(u, y[0])) < 1e-12
     assert rel(casadi_model(ensemble).simulate(u, y[0]), got) < 1e-9

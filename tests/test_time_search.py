@@ -254,6 +254,7 @@ def test_the_search_keeps_an_ensemble_of_trials_only_when_it_beats_the_best_on_v
     ckpt = load_checkpoint(tmp_path / "kept.pt")
     assert [c["arch"] for c in ckpt["model_config"]["member_configs"]] == ["gru", "tcn"]
     assert ckpt["summary"]["search"]["members"] == [0, 2] and ckpt["summary"]["best_valid_nrmse"] < 0.1
+    assert ckpt["meta"]["name"].endswith("_ensemble")  # the FMU's model name says what it is
     from nnfmu.export import casadi_model
     from nnfmu.models import load_model
 

@@ -129,6 +129,9 @@ def _checkpoint(path: Path) -> dict:
     if isinstance(config.get("physics_document"), dict):  # a hybrid on a user's model: name it, not its bytes
         doc = config["physics_document"]
         config["physics_document"] = f"{doc.get('name')} ({len(doc.get('states', []))} states; stored inside)"
+    if config.get("member_configs"):  # a mixed ensemble: each member in a few words, not its whole config
+        config["member_configs"] = [f"{m['arch']} hidden {m['hidden']} layers {m['layers']}"
+                                    for m in config["member_configs"]]
     return {"kind": "checkpoint", "path": str(path), "name": meta.get("name"), "Ts": meta.get("Ts"),
             "model_config": config, "train_config": ckpt.get("train_config"),
             "inputs": stats("u", meta.get("inputs", [])), "outputs": stats("y", meta.get("outputs", [])),

@@ -278,6 +278,7 @@ def _keep(rows: list, folder: Path, dataset: Dataset, out: Path, deadline: float
     from nnfmu.atomic import write_atomic
     from nnfmu.models import load_checkpoint, model_from_checkpoint
     from nnfmu.models.checkpoint import state_snapshot
+    from nnfmu.training import dataset_meta
     from nnfmu.training.trainer import _test_scores
 
     scored = sorted((r for r in rows if r["best_valid_nrmse"] is not None),
@@ -298,7 +299,8 @@ def _keep(rows: list, folder: Path, dataset: Dataset, out: Path, deadline: float
         summary = {"best_valid_nrmse": scores[-1], "stop_reason": "search", "search": search,
                    "notes": [f"an ensemble of trials {', '.join(map(str, members))} of the time-budget search, "
                              f"chosen greedily on validation ({why})"]}
-        ckpt = {**ckpt, "model_config": model.config.to_dict(), "state_dict": state_snapshot(model),
+        meta = {**ckpt["meta"], "name": dataset_meta(dataset, "ensemble")["name"]}  # the FMU's model name
+        ckpt = {**ckpt, "meta": meta, "model_config": model.config.to_dict(), "state_dict": state_snapshot(model),
                 "history": [], "best_epoch": None, "resume": None, "summary": summary}
     else:
         ckpt["summary"].update(search=search)
