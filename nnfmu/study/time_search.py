@@ -334,10 +334,10 @@ def _select(scored: list, folder: Path, dataset: Dataset, ckpt: dict, model, dea
             trials.append(r["trial"])
             models.append(model_from_checkpoint(other))
     if len(models) == 1:
-        return model, tuple(trials), (scored[0]["best_valid_nrmse"],), "one trial improved on its start"
+        return model, tuple(trials), (scored[0]["best_valid_nrmse"],), "no other trial improved on its start"
     valid, _ = validation_trajectories(dataset, TrainConfig.from_dict(ckpt["train_config"]))
     test_share = dataset.test.n_samples / valid.n_samples if "test" in dataset.splits else 0.0
-    # the test is scored twice (from y0, and after the init window), in float64: about 2 free runs per sample
+    # then the test's free runs (one; two with an init window), in float64: about twice a validation run's cost
     selection = select_ensemble(models, valid, context=model.config.init_window, deadline=deadline,
                                 after=2.0 * (2 if model.config.init_window > 1 else 1) * test_share)
     return (selection.model, tuple(trials[i] for i in selection.chosen), tuple(selection.scores),
