@@ -271,6 +271,7 @@ class HybridConfig(ModelConfig):
         checkpoints of built-in hybrids are the same as they were.
         """
         d = dataclasses.asdict(self)
+        del d["member_configs"]  # one hybrid, never a mixed ensemble
         if self.physics_document is None:
             del d["physics_document"]
         else:

@@ -200,8 +200,12 @@ class ModelConfig:
         return self.n_y + self.n_u
 
     def to_dict(self) -> dict:
-        """Plain dict (JSON- and ``weights_only``-safe)."""
-        return dataclasses.asdict(self)
+        """Plain dict (JSON- and ``weights_only``-safe); ``member_configs`` only for a mixed ensemble, so that
+        the record of any other model is as it was before mixed ensembles."""
+        d = dataclasses.asdict(self)
+        if not self.member_configs:
+            del d["member_configs"]
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "ModelConfig":
@@ -215,7 +219,10 @@ class ModelConfig:
             if other is not None and other is not cls:
                 return other.from_dict(d)
         check_options(d, {f.name for f in dataclasses.fields(cls)}, cls.__name__)
-        return cls(**dict(d))
+        d = dict(d)
+        if isinstance(d.get("member_configs"), list):  # read back from JSON
+            d["member_configs"] = tuple(d["member_configs"])
+        return cls(**d)
 
     def replace(self, **changes) -> "ModelConfig":
         """A copy with ``changes``; sizes derived from the changed fields are recomputed."""

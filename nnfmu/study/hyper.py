@@ -16,8 +16,9 @@ from nnfmu.errors import check_options
 from nnfmu.models import ARCHS, ModelConfig, architectures
 from nnfmu.training import TrainConfig
 
-#: ModelConfig fields a run sets: the architecture and the system's sizes, the seeds (members), the data plan.
-RUN_MODEL_FIELDS = ("arch", "n_u", "n_y", "members", "linear_order")
+#: ModelConfig fields a run sets: the architecture and the system's sizes, the seeds (members) or the members of
+#: a search's ensemble, the data plan.
+RUN_MODEL_FIELDS = ("arch", "n_u", "n_y", "members", "member_configs", "linear_order")
 #: TrainConfig fields a run sets: its strategy, length, seed, dtype and validation split.
 RUN_TRAIN_FIELDS = ("strategy", "epochs", "patience", "seed", "max_minutes", "dtype", "valid_fraction")
 
