@@ -29,8 +29,9 @@ import numpy as np
 from nnfmu.data import Dataset, save_dataset
 from nnfmu.errors import CheckpointError, ConfigError, TrainingError
 from nnfmu.metrics import NrmseResult
-from nnfmu.models import EnsembleStepModel, ModelConfig, StepModel, load_checkpoint, load_model, save_checkpoint
+from nnfmu.models import ModelConfig, StepModel, load_checkpoint, load_model, save_checkpoint
 from nnfmu.training.config import TrainConfig
+from nnfmu.training.ensemble_select import ensemble_score
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
 from nnfmu.training.trainer import _as_train_config, prepare_dataset, train
@@ -241,9 +242,8 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
         best = min(pool, key=lambda i: rows[i]["best_valid_nrmse"])
         notes.append(f"fewer than two seeds trained: kept seed {rows[best]['seed']} alone instead of an ensemble")
         return models[best], rows[best]["best_valid_nrmse"], notes
-    model = EnsembleStepModel.from_members([models[i] for i in trained]).eval()
-    result = free_run_nrmse(model, valid, context=n)
-    return model, float("inf") if result is None else result.mean, notes
+    model, score = ensemble_score([models[i] for i in trained], valid, context=n)
+    return model, score, notes
 
 
 def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,

@@ -44,11 +44,16 @@ class Selection:
     stopped: str = ""
 
 
-def _score(models: Sequence[StepModel], valid: Trajectories, context: int) -> float:
+def ensemble_score(models: Sequence[StepModel], valid: Trajectories, context: int = 1) -> tuple[StepModel, float]:
+    """``(model, its free-run NRMSE on valid)``: ``models[0]``, or the ensemble of ``models`` (inf: diverged)."""
     model = models[0] if len(models) == 1 else EnsembleStepModel.from_members(list(models)).eval()
     with torch.no_grad():
         result = free_run_nrmse(model, valid, context=context)
-    return float("inf") if result is None else float(result.mean)
+    return model, float("inf") if result is None else float(result.mean)
+
+
+def _score(models: Sequence[StepModel], valid: Trajectories, context: int) -> float:
+    return ensemble_score(models, valid, context)[1]
 
 
 def select_ensemble(candidates: Sequence[StepModel], valid: Trajectories, *, context: int = 1,
