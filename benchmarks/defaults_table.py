@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -59,6 +60,7 @@ def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reus
     for arch in archs:
         ckpt = work / f"{arch}.pt"
         ckpt.unlink(missing_ok=True)
+        shutil.rmtree(work / f"{arch}.seeds", ignore_errors=True)  # the plan's seeds train anew, not resumed
         chosen = [] if arch == "search" else ["--arch", arch]
         cpu[arch] = _nnfmu("train", "--data", str(data), *chosen, "-o", str(ckpt), "--quiet", *extra,
                            log=work / f"{arch}.log")

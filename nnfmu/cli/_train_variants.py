@@ -14,25 +14,30 @@ def print_test(ds, test, test_window, n: int) -> None:
               f"scored from sample {n})")
 
 
-def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None) -> int:
-    """``--seeds K``: :func:`nnfmu.training.train_seeds`, with every seed's scores and their spread printed."""
+def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None,
+              seeds: int | None = None) -> int:
+    """``--seeds K`` (or the plan's ``seeds``): :func:`nnfmu.training.train_seeds`, with every seed's scores and
+    their spread printed."""
     from nnfmu.training import train_seeds
+
+    keep = args.keep or ("ensemble" if seeds is None else "select")  # the plan's seeds: selected on validation
+    seeds = args.seeds if seeds is None else seeds
 
     if args.resume:
         from nnfmu.errors import ConfigError
 
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
-    result = train_seeds(ds, model_config, train_config, seeds=args.seeds, keep=args.keep, out=out, jobs=args.jobs,
-                         progress=not args.quiet and args.jobs == 1, device=device, threads=args.threads,
-                         linear=linear)
+    result = train_seeds(ds, model_config, train_config, seeds=seeds, keep=keep, out=out, jobs=args.jobs,
+                         progress=not args.quiet, device=device, threads=args.threads, linear=linear)
     for note in result.notes:
         print(f"note: {note}")
     for r in result.seeds:
         test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
         print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
     spread = result.spread()
-    print(f"kept the {args.keep} of {args.seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
+    what = {"ensemble": "the ensemble", "best": "the best", "select": "the selection"}[keep]
+    print(f"kept {what} of {seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
           f"checkpoint {out}")
     if result.test is not None:
         print_test(ds, result.test, result.test_window, model_config.init_window)
@@ -57,7 +62,7 @@ def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out
     for mode, config in configs.items():
         part = out.with_name(f"{out.stem}.{mode}.pt")
         print(f"--- {mode} output mode -> {part}")
-        status = (run_seeds(args, ds, config, train_config, part, device) if args.seeds is not None
+        status = (run_seeds(args, ds, config, train_config, part, device) if (args.seeds or 1) > 1
                   else run_one(args, ds, config, train_config, part, device))
         if status != 0:
             return status

@@ -22,7 +22,7 @@ import argparse
 from nnfmu.cli import _arch
 from nnfmu.cli._resources import add_resource_options, check_resource_options
 from nnfmu.cli._train_plan import prepare as prepare_defaults
-from nnfmu.cli._train_plan import report_end
+from nnfmu.cli._train_plan import planned_seeds, report_end
 from nnfmu.cli._train_search import applies as search_applies
 from nnfmu.cli._train_search import run_search
 from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
@@ -110,10 +110,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "left out are chosen from the data and printed")
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
-                       help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out")
-    seeds.add_argument("--keep", choices=["ensemble", "best"], default="ensemble",
-                       help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU), "
-                            "or the best on validation (default ensemble)")
+                       help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out "
+                            "(default: 2 side by side when the plan chooses the budget and a core is idle beside "
+                            "the training, else 1; --seeds 1: one network)")
+    seeds.add_argument("--keep", choices=["ensemble", "best", "select"],
+                       help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU; "
+                            "the default with --seeds), the best on validation, or select: the best, joined by "
+                            "others only where that lowers the validation NRMSE by 1 %% (the default for the "
+                            "plan's seeds)")
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
@@ -227,16 +231,17 @@ def _run(args: argparse.Namespace) -> int:
     check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
-    linear = None
+    linear, seeds = None, args.seeds
     if stored is None:
         given = {**_given(args, _TRAIN_OPTIONS), **({} if args.join is None else {"join": args.join})}
         ds, model_config, train_config, linear = prepare_defaults(args, ds, model_config, train_config, given)
         if search_applies(args):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
             return run_search(args, ds, model_config, train_config, out, device, linear, given)
+        seeds = planned_seeds(args, model_config, given, device)
     if args.increment == "auto":
         return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
-    if args.seeds is not None:
-        return run_seeds(args, ds, model_config, train_config, out, device, linear=linear)
+    if seeds is not None and seeds > 1:  # --seeds 1 is one plain training
+        return run_seeds(args, ds, model_config, train_config, out, device, linear=linear, seeds=seeds)
     return _run_one(args, ds, model_config, train_config, out, device, linear=linear)
 
 

@@ -8,6 +8,9 @@ parallel processes where there are cores), each a normal resumable :func:`train`
 - ``keep="best"``: the seed with the lowest validation NRMSE, or
 - ``keep="ensemble"``: all K as one :class:`~nnfmu.models.EnsembleStepModel` (their mean output
   fed back as the one prediction), which exports as one FMU.
+- ``keep="select"``: the greedy selection on validation (:mod:`nnfmu.training.ensemble_select`): from
+  the best seed, another joins only if it lowers the validation NRMSE by 1 % or more, so the kept model
+  is the best seed alone unless averaging helps on validation.
 
 The result lists every seed's validation and test scores, so the spread over seeds is reported
 next to the kept model's. The validation split is fixed once (carved with the base seed), so
@@ -31,12 +34,12 @@ from nnfmu.errors import CheckpointError, ConfigError, TrainingError
 from nnfmu.metrics import NrmseResult
 from nnfmu.models import ModelConfig, StepModel, load_checkpoint, load_model, save_checkpoint
 from nnfmu.training.config import TrainConfig
-from nnfmu.training.ensemble_select import ensemble_score
+from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
 from nnfmu.training.trainer import _as_train_config, prepare_dataset, train
 
-KEEP = ("best", "ensemble")
+KEEP = ("best", "ensemble", "select")
 
 
 @dataclass(frozen=True)
@@ -47,7 +50,7 @@ class SeedsResult:
     ----------
     model : StepModel
         The kept model (the best seed, or the ensemble), in eval mode, as saved at ``checkpoint``.
-    keep : {'best', 'ensemble'}
+    keep : {'best', 'ensemble', 'select'}
     valid_nrmse : float
         The kept model's validation free-run NRMSE (the trainer's protocol).
     test, test_window : NrmseResult or None
@@ -135,16 +138,18 @@ def _train_in_processes(work: list, jobs: int, device, threads: int | None, line
         pending, running, failed = list(work), [], []
         while pending or running:
             while pending and len(running) < jobs:
-                _, model_config, cfg, path, _ = pending.pop(0)
+                _, model_config, cfg, path, progress = pending.pop(0)
                 args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
                         json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
-                        str(threads or 1), *extra]
+                        str(threads or 1), str(int(progress)), *extra]
+                # a worker that shows its progress bar writes it to this process' stderr
                 running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
-                                                       stderr=subprocess.PIPE, text=True)))
+                                                       stderr=None if progress else subprocess.PIPE, text=True)))
             path, proc = running.pop(0)
             _, err = proc.communicate()
             if proc.returncode != 0:
-                failed.append(f"{path.name}: {err.strip().splitlines()[-1] if err.strip() else proc.returncode}")
+                err = (err or "").strip()
+                failed.append(f"{path.name}: {err.splitlines()[-1] if err else f'exit status {proc.returncode}'}")
         if failed:
             raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
                                 "seeds are kept, run the same call again to continue")
@@ -171,7 +176,7 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     train_config : TrainConfig, optional
     seeds : int
         K >= 2 seeds.
-    keep : {'best', 'ensemble'}
+    keep : {'best', 'ensemble', 'select'}
         See the module docstring.
     out : path
         The kept model's checkpoint; members go to ``<stem>.seeds/``. Finished members are not
@@ -179,7 +184,7 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     jobs : int, optional
         Processes training at once (default: the cores this process may use, at most K).
     progress : bool
-        Progress bars (only with ``jobs=1``).
+        Progress bars: every seed's one after the other with one job, else the first seed's.
     device, threads, linear :
         As in :func:`train`, for every seed (a linear path's start is identified once, here, when not given).
     """
@@ -195,12 +200,13 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     seed_list = [cfg.seed + i for i in range(seeds)]
     paths = seed_paths(out, seed_list)
     paths[0].parent.mkdir(parents=True, exist_ok=True)
-    work = [(dataset, model_config, cfg.replace(seed=s), p, progress and jobs == 1) for s, p in zip(seed_list, paths)]
+    n_jobs = _jobs(jobs, seeds)
+    work = [(dataset, model_config, cfg.replace(seed=s), p, progress and (n_jobs == 1 or i == 0))
+            for i, (s, p) in enumerate(zip(seed_list, paths))]  # side by side, the first seed shows its progress
     if model_config.linear_order and linear is None:
         from nnfmu.linear import LinearConfig, identify_linear
 
         linear = identify_linear(dataset, LinearConfig(order=model_config.linear_order))
-    n_jobs = _jobs(jobs, seeds)
     if n_jobs == 1:
         for item in work:
             if _train_one(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
@@ -246,6 +252,18 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
     return model, score, notes
 
 
+def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list]:
+    """The greedy selection over the seeds that improved on their start (all, if none did), best first."""
+    pool = [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0] or list(range(len(rows)))
+    pool.sort(key=lambda i: rows[i]["best_valid_nrmse"])
+    picked = select_ensemble([models[i] for i in pool], valid, context=n, max_members=len(pool))
+    seeds = [rows[pool[c]]["seed"] for c in picked.chosen]
+    steps = " -> ".join(f"{v:.4f}" for v in picked.scores)
+    what = f"seed {seeds[0]} alone" if len(seeds) == 1 else f"the ensemble of seeds {', '.join(map(str, seeds))}"
+    note = f"kept {what} (validation NRMSE {steps}; {picked.stopped})"
+    return picked.model, picked.scores[-1], [note]
+
+
 def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,
           notes: list) -> SeedsResult:
     rows = [_seed_row(s, p) for s, p in zip(seed_list, paths)]
@@ -256,6 +274,9 @@ def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths:
         best = min(range(len(rows)), key=lambda i: rows[i]["best_valid_nrmse"])
         model, valid_nrmse = models[best], rows[best]["best_valid_nrmse"]
         notes = notes + [f"kept seed {rows[best]['seed']} (lowest validation NRMSE)"]
+    elif keep == "select":
+        model, valid_nrmse, chosen = _selected(models, rows, valid, n)
+        notes = notes + chosen
     else:
         model, valid_nrmse, dropped = _ensemble_of_trained(models, rows, valid, n)
         notes = notes + dropped
