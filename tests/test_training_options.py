@@ -123,8 +123,17 @@ def test_seeds_keep_the_best_or_their_ensemble_and_resume(valve_tiny, tmp_path):
     assert [p.stat().st_mtime_ns for p in members] == stamps  # finished seeds are not trained again
     chosen = min(ens.seeds, key=lambda r: r["best_valid_nrmse"])
     assert best.test_nrmse == pytest.approx(chosen["test_nrmse"]) and best.model.config.members == 1
+    # the selection averages the seeds only where that lowers the validation NRMSE by 1 %
+    picked = train_seeds(valve_tiny, gru(), cfg, seeds=2, keep="select", out=tmp_path / "e.pt", jobs=1)
+    averaged = ens.valid_nrmse <= 0.99 * chosen["best_valid_nrmse"] and isinstance(ens.model, EnsembleStepModel)
+    assert picked.valid_nrmse == pytest.approx(ens.valid_nrmse if averaged else chosen["best_valid_nrmse"], rel=1e-5)
+    assert isinstance(picked.model, EnsembleStepModel) == averaged
+    assert any(n.startswith("kept seed" if not averaged else "kept the ensemble of seeds") for n in picked.notes)
     with pytest.raises(ConfigError, match="other settings"):
         train_seeds(valve_tiny, gru(hidden=4), cfg, seeds=2, out=tmp_path / "e.pt")
+    narrow = train_seeds(valve_tiny, gru(hidden=4), cfg, seeds=2, out=tmp_path / "e.pt", jobs=1, overwrite=True)
+    assert all(load_checkpoint(p)["model_config"]["hidden"] == 4 for p in members)  # --force: trained anew
+    assert narrow.model.config.hidden == 4
     with pytest.raises(ConfigError, match="seeds must be an integer >= 2"):
         train_seeds(valve_tiny, gru(), cfg, seeds=1, out=tmp_path / "x.pt")
 

@@ -3,6 +3,9 @@ never trained, feedback noise that does not integrate in increment mode, and che
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -165,3 +168,71 @@ def test_the_train_cli_says_join_no_join_or_nothing():
     base = ["train", "--data", "d", "--arch", "gru", "-o", "m.pt"]
     assert [build_parser().parse_args(base + extra).join for extra in ([], ["--join"], ["--no-join"])] == \
         [None, True, False]
+
+
+def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_the_selection(tmp_path, capsys,
+                                                                                          monkeypatch):
+    """With the budget left to the plan and a core idle, two seeds train at once; --seeds 1 and --epochs train one."""
+    from nnfmu.cli import _train_plan, main
+    from nnfmu.data import save_dataset
+    from nnfmu.models import load_checkpoint
+
+    data = save_dataset(one_record(300, 100), tmp_path / "d")
+    base = ["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--patience", "1", "--quiet"]
+    monkeypatch.setattr(_train_plan, "usable_cores", lambda: 2)
+    assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
+    out = capsys.readouterr().out
+    assert "plan: seeds: 2 trained side by side" in out and "kept the selection of 2 seeds" in out
+    assert sorted(p.name for p in (tmp_path / "a.seeds").iterdir()) == ["seed-0.pt", "seed-1.pt"]
+    summary = load_checkpoint(tmp_path / "a.pt")["summary"]
+    assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1]
+    assert summary["best_valid_nrmse"] <= min(r["best_valid_nrmse"] for r in summary["seeds"]) + 1e-9
+    for extra, name in ((["--seeds", "1"], "b"), (["--epochs", "3"], "c")):
+        assert main([*base, *extra, "-o", str(tmp_path / f"{name}.pt")]) == 0
+        assert "plan: seeds" not in capsys.readouterr().out and not (tmp_path / f"{name}.seeds").exists()
+        assert "seeds" not in load_checkpoint(tmp_path / f"{name}.pt")["summary"]
+    monkeypatch.setattr(_train_plan, "usable_cores", lambda: 1)  # no idle core: one training
+    assert main([*base, "-o", str(tmp_path / "d.pt")]) == 0
+    assert "plan: seeds" not in capsys.readouterr().out and not (tmp_path / "d.seeds").exists()
+
+
+def _running_with(text: str) -> list[int]:
+    """PIDs of the processes whose command line holds ``text`` (Linux /proc)."""
+    pids = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            if text.encode() in cmdline.read_bytes():
+                pids.append(int(cmdline.parent.name))
+        except OSError:
+            pass
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="reads /proc to find the seeds' processes")
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="two seeds train at the defaults only with two cores")
+def test_a_terminated_default_training_stops_its_seeds_and_keeps_them(tmp_path):
+    """SIGTERM to `nnfmu train` reaches its two seed processes: they stop and keep their checkpoints (exit 143)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from nnfmu.data import save_dataset
+
+    data = save_dataset(one_record(3000, 100), tmp_path / "d")
+    out = tmp_path / "a.pt"
+    proc = subprocess.Popen([sys.executable, "-m", "nnfmu", "train", "--data", str(data), "--arch", "mlp", "--hidden",
+                             "4", "--quiet", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    members = [tmp_path / "a.seeds" / f"seed-{s}.pt" for s in (0, 1)]
+    deadline = time.monotonic() + 120
+    while not all(m.exists() for m in members) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()  # still training: the budget is thousands of epochs
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 143 and "run the same command again to continue" in stdout, stderr
+    assert not out.exists() and _running_with(str(tmp_path / "a.seeds")) == []
+    from nnfmu.models import load_checkpoint
+
+    kept = [load_checkpoint(m) for m in members]  # stopped by the signal, not trained to their end
+    assert all("resume" in c and "stop_reason" not in (c.get("summary") or {}) for c in kept)

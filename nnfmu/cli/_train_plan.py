@@ -7,7 +7,7 @@ the network learns a correction to it, starting from zero. The windows, batch, b
 tail the user left out are chosen from the data (:mod:`nnfmu.training.plan`); the choices are printed.
 A record with ``data_plan="budget"`` (the hybrid) trains on whole trajectories unless ``--truncate`` is given.
 
-With the budget left to the plan (no ``--epochs``, ``--seeds``, ``--resume``), on the CPU and with a core
+With the budget left to the plan (no ``--epochs``, ``--max-minutes``, ``--seeds``, ``--resume``), on the CPU and with a core
 idle beside the training (one torch thread each), :data:`DEFAULT_SEEDS` seeds train side by side
 (:func:`planned_seeds`) and the greedy selection on validation keeps the best, or their ensemble where
 averaging lowers the validation NRMSE (``--keep select``): the same wall time, one FMU, and less of the
@@ -98,9 +98,9 @@ def planned_seeds(args, model_config, given: dict, device) -> int | None:
     chooses the budget and the cores allow, else None (one training). The choice is printed."""
     from nnfmu.models import architectures
 
-    if args.seeds is not None or args.resume or args.increment == "auto" or "epochs" in given:
+    if args.seeds is not None or args.resume or args.increment == "auto" or {"epochs", "max_minutes"} & set(given):
         return args.seeds
-    if architectures.architecture(model_config.arch).data_plan is not True:  # the hybrid: one slow training
+    if architectures.architecture(model_config.arch).search_rank is None:  # the networks the search averages
         return None
     threads, cores = args.threads or 1, usable_cores()
     if getattr(device, "type", "cpu") != "cpu" or cores < DEFAULT_SEEDS * threads:

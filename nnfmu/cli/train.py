@@ -111,8 +111,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out "
-                            "(default: 2 side by side when the plan chooses the budget and a core is idle beside "
-                            "the training, else 1; --seeds 1: one network)")
+                            "(default: 2 side by side when the plan chooses the budget, no --epochs or "
+                            "--max-minutes, and a core is idle beside the training, else 1; --seeds 1: one network)")
     seeds.add_argument("--keep", choices=["ensemble", "best", "select"],
                        help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU; "
                             "the default with --seeds), the best on validation, or select: the best, joined by "
@@ -121,7 +121,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
-    p.add_argument("--force", action="store_true", help="overwrite an existing --out file")
+    p.add_argument("--force", action="store_true",
+                   help="overwrite an existing --out file, and the seeds in <out stem>.seeds/ trained with other settings")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_resource_options(p)
     p.set_defaults(func=_run)
@@ -222,6 +223,9 @@ def _run(args: argparse.Namespace) -> int:
     check_writable(out)  # before the data are loaded and the network built
     device = check_resource_options(args)
     ds = load_dataset(args.data)
+    if args.resume and not out.exists() and (out.parent / f"{out.stem}.seeds").is_dir():
+        raise ConfigError(f"{out} is written when its seeds in {out.parent / f'{out.stem}.seeds'} are done: run the "
+                          "same command again without --resume, and the seeds continue")
     stored = load_checkpoint(out) if args.resume else None
     if stored is None and out.exists() and not args.force:
         raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")

@@ -133,7 +133,9 @@ class Architecture:
         The hyperparameters (:class:`nnfmu.study.Hyper` fields) that ``nnfmu tune`` starts from where the study's
         tables (:mod:`nnfmu.study.presets`) have none for it (the defaults of its config otherwise).
     search_rank : int, optional
-        Place in the architectures that ``nnfmu train --max-minutes`` searches (lowest first); None: not searched.
+        Place in the architectures that ``nnfmu train --max-minutes`` searches (lowest first), whose trials it may
+        average into one model; at the defaults, ``nnfmu train`` trains such a network from two seeds where a core
+        is idle. None: not searched, one training.
     data_plan : bool or "budget"
         What ``nnfmu train`` chooses from the data for it where the user left it out (:mod:`nnfmu.training.plan`):
         True: windows, batch, budget and validation tail, and ``--max-minutes`` alone searches; ``"budget"``: the

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -128,7 +129,9 @@ def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, pa
 def _train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None) -> None:
     """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
 
-    Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard.
+    Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard. The workers run
+    in sessions of their own, so a signal to this process (Ctrl-C, SIGTERM) reaches them once, from here: each
+    stops after its epoch and keeps its checkpoint, and the same call continues them.
     """
     with tempfile.TemporaryDirectory(prefix="nnfmu-seeds-") as tmp:
         data = Path(tmp) / "dataset"
@@ -136,20 +139,30 @@ def _train_in_processes(work: list, jobs: int, device, threads: int | None, line
         extra = [] if linear is None else [str(linear.save(Path(tmp) / "linear.json"))]
         env = {**os.environ, "OMP_NUM_THREADS": "1"}
         pending, running, failed = list(work), [], []
-        while pending or running:
-            while pending and len(running) < jobs:
-                _, model_config, cfg, path, progress = pending.pop(0)
-                args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
-                        json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
-                        str(threads or 1), str(int(progress)), *extra]
-                # a worker that shows its progress bar writes it to this process' stderr
-                running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
-                                                       stderr=None if progress else subprocess.PIPE, text=True)))
-            path, proc = running.pop(0)
-            _, err = proc.communicate()
-            if proc.returncode != 0:
-                err = (err or "").strip()
-                failed.append(f"{path.name}: {err.splitlines()[-1] if err else f'exit status {proc.returncode}'}")
+        try:
+            while pending or running:
+                while pending and len(running) < jobs:
+                    _, model_config, cfg, path, progress = pending.pop(0)
+                    args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
+                            json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
+                            str(threads or 1), str(int(progress)), *extra]
+                    # a worker that shows its progress bar writes it to this process' stderr
+                    running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
+                                                           stderr=None if progress else subprocess.PIPE, text=True,
+                                                           start_new_session=True)))
+                path, proc = running[0]
+                _, err = proc.communicate()
+                running.pop(0)
+                if proc.returncode != 0:
+                    err = (err or "").strip()
+                    failed.append(f"{path.name}: {err.splitlines()[-1] if err else f'exit status {proc.returncode}'}")
+        except BaseException:  # stopped here (Ctrl-C, SIGTERM): the workers stop after their epoch, and keep it
+            for _, proc in running:
+                if proc.poll() is None:
+                    proc.send_signal(signal.SIGINT)
+            for _, proc in running:
+                proc.communicate()
+            raise
         if failed:
             raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
                                 "seeds are kept, run the same call again to continue")
@@ -165,7 +178,8 @@ def _jobs(jobs: int | None, k: int) -> int:
 
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
                 seeds: int = 3, keep: str = "ensemble", out: str | os.PathLike, jobs: int | None = None,
-                progress: bool = False, device="auto", threads: int | None = None, linear=None) -> SeedsResult:
+                progress: bool = False, device="auto", threads: int | None = None, linear=None,
+                overwrite: bool = False) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
 
     Parameters
@@ -187,6 +201,9 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
         Progress bars: every seed's one after the other with one job, else the first seed's.
     device, threads, linear :
         As in :func:`train`, for every seed (a linear path's start is identified once, here, when not given).
+    overwrite : bool
+        Delete a member checkpoint that holds a training of other settings and train it anew (``nnfmu train
+        --force``); False: a ConfigError says so.
     """
     if keep not in KEEP:
         raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
@@ -207,13 +224,19 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
         from nnfmu.linear import LinearConfig, identify_linear
 
         linear = identify_linear(dataset, LinearConfig(order=model_config.linear_order))
+    for _, mc, c, path, _ in work:  # settings clashes are reported (or cleared) here, before any training
+        try:
+            _member_state(path, mc, c)
+        except ConfigError:
+            if not overwrite:
+                raise
+            path.unlink()
+            _error_file(path).unlink(missing_ok=True)
     if n_jobs == 1:
         for item in work:
             if _train_one(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
                 break
     else:
-        for _, mc, c, path, _ in work:  # settings clashes are reported here, before any process starts
-            _member_state(path, mc, c)
         _train_in_processes(work, n_jobs, device, threads, linear)
     if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
         raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
