@@ -83,6 +83,11 @@ def test_the_selection_keeps_members_whose_errors_cancel_and_leaves_out_one_that
     selection = select_ensemble([up, again, down], data.valid)
     assert selection.chosen == [0, 2] and selection.stopped.startswith("no member lowered")
     assert selection.scores[1] < 0.5 * selection.scores[0]
+    # the third member was tried and left out: its ensemble's score is reported, above the kept one's
+    from nnfmu.training.ensemble_select import ensemble_score
+
+    assert selection.rejected == pytest.approx(ensemble_score([up, down, again], data.valid)[1], rel=1e-9)
+    assert selection.rejected > 0.99 * selection.scores[-1]
     unbiased = path_model("gru", data, linear)  # the linear model: what the two average to
     u, y = data.valid.u[0], data.valid.y[0]
     assert rel(selection.model.simulate(u, y[0]), unbiased.simulate(u, y[0])) < 1e-9

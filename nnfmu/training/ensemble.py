@@ -283,7 +283,8 @@ def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float
     seeds = [rows[pool[c]]["seed"] for c in picked.chosen]
     steps = " -> ".join(f"{v:.4f}" for v in picked.scores)
     what = f"seed {seeds[0]} alone" if len(seeds) == 1 else f"the ensemble of seeds {', '.join(map(str, seeds))}"
-    note = f"kept {what} (validation NRMSE {steps}; {picked.stopped})"
+    tried = "" if picked.rejected is None else f": the best ensemble tried scored {picked.rejected:.4f}"
+    note = f"kept {what} (validation NRMSE {steps}; {picked.stopped}{tried})"
     return picked.model, picked.scores[-1], [note]
 
 

@@ -35,13 +35,15 @@ class Selection:
 
     ``chosen``: indices into the candidates, in the order added (``chosen[0] == 0``); ``scores``: the
     validation free-run NRMSE after each addition (``scores[0]``: the best candidate alone), so
-    ``scores[-1]`` is ``model``'s; ``stopped``: why the selection ended.
+    ``scores[-1]`` is ``model``'s; ``stopped``: why the selection ended; ``rejected``: the validation
+    NRMSE of the best ensemble tried last and not kept (None if none was).
     """
 
     model: StepModel
     chosen: list = field(default_factory=list)
     scores: list = field(default_factory=list)
     stopped: str = ""
+    rejected: float | None = None
 
 
 def ensemble_score(models: Sequence[StepModel], valid: Trajectories, context: int = 1) -> tuple[StepModel, float]:
@@ -71,6 +73,7 @@ def select_ensemble(candidates: Sequence[StepModel], valid: Trajectories, *, con
     started = time.monotonic()
     chosen, scores = [0], [_score(candidates[:1], valid, context)]
     one = time.monotonic() - started  # seconds of one member's validation free run
+    rejected = None
 
     def in_time(k: int) -> bool:
         return deadline is None or time.monotonic() + k * one * (1.0 + after) <= deadline
@@ -95,6 +98,7 @@ def select_ensemble(candidates: Sequence[StepModel], valid: Trajectories, *, con
             if not late:
                 continue
         stopped = "the time was up" if late else f"no member lowered the validation NRMSE by {100 * min_gain:g} %"
+        rejected = None if best is None or best in chosen else tried[best]
         break
     model = candidates[0] if len(chosen) == 1 else EnsembleStepModel.from_members([candidates[i] for i in chosen])
-    return Selection(model.eval(), chosen, scores, stopped)
+    return Selection(model.eval(), chosen, scores, stopped, rejected)
