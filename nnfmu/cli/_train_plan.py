@@ -7,8 +7,8 @@ the network learns a correction to it, starting from zero. The windows, batch, b
 tail the user left out are chosen from the data (:mod:`nnfmu.training.plan`); the choices are printed.
 A record with ``data_plan="budget"`` (the hybrid) trains on whole trajectories unless ``--truncate`` is given.
 
-With the budget left to the plan (no ``--epochs``, ``--max-minutes``, ``--seeds``, ``--resume``), on the CPU and with a core
-idle beside the training (one torch thread each), :data:`DEFAULT_SEEDS` seeds train side by side
+With the budget left to the plan (no ``--epochs``, ``--max-minutes``, ``--seeds``, ``--resume``), on the CPU
+and with a core idle beside the training (one torch thread each), :data:`DEFAULT_SEEDS` seeds train side by side
 (:func:`planned_seeds`) and the greedy selection on validation keeps the best, or their ensemble where
 averaging lowers the validation NRMSE (``--keep select``): the same wall time, one FMU, and less of the
 seed-to-seed variance that decided single cells of the defaults table (docs/accuracy.md).

@@ -122,7 +122,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true",
-                   help="overwrite an existing --out file, and the seeds in <out stem>.seeds/ trained with other settings")
+                   help="overwrite an existing --out file, and the seeds in <out stem>.seeds/ trained with other "
+                        "settings")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_resource_options(p)
     p.set_defaults(func=_run)

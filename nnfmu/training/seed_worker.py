@@ -1,6 +1,6 @@
-"""``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt DEVICE THREADS PROGRESS [LINEAR.json]``.
+"""One seed of :func:`nnfmu.training.train_seeds`, in a process of its own.
 
-One seed of :func:`nnfmu.training.train_seeds`.
+``python -m nnfmu.training.seed_worker DATASET_DIR MODEL_JSON TRAIN_JSON OUT.pt DEVICE THREADS PROGRESS [LINEAR.json]``
 
 Runs in a fresh interpreter so that :func:`nnfmu.training.train_seeds` can train seeds side by side
 without ``multiprocessing`` (which would re-run the caller's script). The dataset is a dataset
@@ -25,8 +25,8 @@ def main(argv: list[str]) -> int:
     data, model_json, train_json, out, device, threads, progress, *linear = argv
     start = load_linear(linear[0]) if linear else None  # the linear path's start (ModelConfig.linear_order > 0)
     _train_one(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
-               TrainConfig.from_dict(json.loads(train_json)), Path(out), progress == "1", device=device, threads=int(threads),
-               linear=start)
+               TrainConfig.from_dict(json.loads(train_json)), Path(out), progress == "1", device=device,
+               threads=int(threads), linear=start)
     return 0
 
 
