@@ -187,6 +187,10 @@ def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_the_s
     summary = load_checkpoint(tmp_path / "a.pt")["summary"]
     assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1]
     assert summary["best_valid_nrmse"] <= min(r["best_valid_nrmse"] for r in summary["seeds"]) + 1e-9
+    from nnfmu.cli.info import describe, render
+
+    shown = " ".join(render(describe(tmp_path / "a.pt")).split())  # nnfmu info: each seed in a few words
+    assert all(f"seed {r['seed']}: validation {r['best_valid_nrmse']:.4f}" in shown for r in summary["seeds"])
     for extra, name in ((["--seeds", "1"], "b"), (["--epochs", "3"], "c")):
         assert main([*base, *extra, "-o", str(tmp_path / f"{name}.pt")]) == 0
         assert "plan: seeds" not in capsys.readouterr().out and not (tmp_path / f"{name}.seeds").exists()

@@ -123,8 +123,9 @@ def _checkpoint(path: Path) -> dict:
                                  if f"{kind}_mean" in state else dict(c) for j, c in enumerate(chans)]
     history = ckpt.get("history") or []
     summary = dict(ckpt.get("summary") or {})
-    summary.update(best_epoch=ckpt.get("best_epoch"), seconds=float(sum(h.get("seconds", 0.0) for h in history)),
-                   resumable=ckpt.get("resume") is not None)
+    seconds = sum(h.get("seconds", 0.0) for h in history) + sum(r.get("seconds") or 0.0
+                                                               for r in summary.get("seeds") or [])
+    summary.update(best_epoch=ckpt.get("best_epoch"), seconds=float(seconds), resumable=ckpt.get("resume") is not None)
     config = dict(ckpt["model_config"])
     if isinstance(config.get("physics_document"), dict):  # a hybrid on a user's model: name it, not its bytes
         doc = config["physics_document"]
@@ -202,6 +203,8 @@ def _text(value, key: str = "") -> str:
         return "unbounded (time budget)"
     if key == "seconds" and isinstance(value, (int, float)):
         return f"{value:.1f} s"
+    if key == "seeds" and isinstance(value, list) and all(isinstance(r, dict) for r in value):
+        return "; ".join(_seed(r) for r in value)
     if isinstance(value, bool) or value is None:
         return {True: "yes", False: "no", None: "-"}[value]
     if isinstance(value, list):
@@ -209,6 +212,14 @@ def _text(value, key: str = "") -> str:
     if isinstance(value, dict):
         return "; ".join(f"{k} {_text(v, k)}" for k, v in value.items())
     return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _seed(row: dict) -> str:
+    """One seed of a model kept of several (``nnfmu train --seeds``, or the plan's two) in a few words."""
+    score = lambda v: "-" if v is None else f"{v:.4f}"
+    return (f"seed {row.get('seed')}: validation {score(row.get('best_valid_nrmse'))}, test "
+            f"{score(row.get('test_nrmse'))}, best epoch {row.get('best_epoch')} of {row.get('epochs_run')}, "
+            f"{row.get('stop_reason')}" + (f" ({row['error']})" if row.get("error") else ""))
 
 
 def _run(args: argparse.Namespace) -> int:
