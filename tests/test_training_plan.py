@@ -3,7 +3,6 @@ never trained, feedback noise that does not integrate in increment mode, and che
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from nnfmu.models import ModelConfig, build_model
 from nnfmu.training import TrainConfig, train
 from nnfmu.training import ensemble as seeds_module
 from nnfmu.training.plan import MAX_WINDOW, plan_training, still_improving, valid_fraction
+from nnfmu.training.resources import usable_cores
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -173,13 +173,14 @@ def test_the_train_cli_says_join_no_join_or_nothing():
 def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_the_selection(tmp_path, capsys,
                                                                                           monkeypatch):
     """With the budget left to the plan and a core idle, two seeds train at once; --seeds 1 and --epochs train one."""
-    from nnfmu.cli import _train_plan, main
+    from nnfmu.cli import main
+    from nnfmu.training import resources
     from nnfmu.data import save_dataset
     from nnfmu.models import load_checkpoint
 
     data = save_dataset(one_record(300, 100), tmp_path / "d")
     base = ["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--patience", "1", "--quiet"]
-    monkeypatch.setattr(_train_plan, "usable_cores", lambda: 2)
+    monkeypatch.setattr(resources, "usable_cores", lambda: 2)
     assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
     out = capsys.readouterr().out
     assert "plan: seeds: 2 trained side by side" in out and "kept the selection of 2 seeds" in out
@@ -195,7 +196,7 @@ def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_the_s
         assert main([*base, *extra, "-o", str(tmp_path / f"{name}.pt")]) == 0
         assert "plan: seeds" not in capsys.readouterr().out and not (tmp_path / f"{name}.seeds").exists()
         assert "seeds" not in load_checkpoint(tmp_path / f"{name}.pt")["summary"]
-    monkeypatch.setattr(_train_plan, "usable_cores", lambda: 1)  # no idle core: one training
+    monkeypatch.setattr(resources, "usable_cores", lambda: 1)  # no idle core: one training
     assert main([*base, "-o", str(tmp_path / "d.pt")]) == 0
     assert "plan: seeds" not in capsys.readouterr().out and not (tmp_path / "d.seeds").exists()
 
@@ -213,7 +214,7 @@ def _running_with(text: str) -> list[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="reads /proc to find the seeds' processes")
-@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="two seeds train at the defaults only with two cores")
+@pytest.mark.skipif(usable_cores() < 2, reason="two seeds train at the defaults only with two cores")
 def test_a_terminated_default_training_stops_its_seeds_and_keeps_them(tmp_path):
     """SIGTERM to `nnfmu train` reaches its two seed processes: they stop and keep their checkpoints (exit 143)."""
     import signal

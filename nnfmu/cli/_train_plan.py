@@ -16,7 +16,6 @@ seed-to-seed variance that decided single cells of the defaults table (docs/accu
 
 from __future__ import annotations
 
-import os
 import time
 
 #: Seeds trained side by side at the defaults when the cores allow (docs/accuracy.md: two seeds, averaged).
@@ -88,21 +87,17 @@ def report_end(result, linear) -> None:
         print(f"the training never improved on its start on validation: the kept weights are {start}'s")
 
 
-def usable_cores() -> int:
-    """The cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def planned_seeds(args, model_config, given: dict, device) -> int | None:
     """How many seeds ``nnfmu train`` trains: ``--seeds`` if given, else :data:`DEFAULT_SEEDS` where the plan
     chooses the budget and the cores allow, else None (one training). The choice is printed."""
     from nnfmu.models import architectures
+    from nnfmu.training import resources
 
     if args.seeds is not None or args.resume or args.increment == "auto" or {"epochs", "max_minutes"} & set(given):
         return args.seeds
     if architectures.architecture(model_config.arch).search_rank is None:  # the networks the search averages
         return None
-    threads, cores = args.threads or 1, usable_cores()
+    threads, cores = args.threads or 1, resources.usable_cores()
     if getattr(device, "type", "cpu") != "cpu" or cores < DEFAULT_SEEDS * threads:
         return None
     print(f"plan: seeds: {DEFAULT_SEEDS} trained side by side ({cores} cores usable, {threads} thread each); the best "

@@ -48,6 +48,7 @@ from nnfmu.study.time_space import trial_configs, trial_points
 from nnfmu.study.tune import METRIC, _finite
 from nnfmu.training import TrainConfig
 from nnfmu.training.plan import PATIENCE_STEPS
+from nnfmu.training.resources import usable_cores
 
 END_RESERVE = 0.05  # of the budget, at least MIN_RESERVE_S
 MIN_RESERVE_S = 5.0
@@ -115,7 +116,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
                                    linear_order=0 if linear is None else linear.n_x)
     if not (isinstance(minutes, (int, float)) and minutes > 0):
         raise ConfigError(f"the search budget must be > 0 minutes, got {minutes!r}")
-    cpus = max(1, int(cpus or len(os.sched_getaffinity(0))))
+    cpus = max(1, int(cpus or usable_cores()))
     out, given = Path(out), set(given)
     reserve = max(MIN_RESERVE_S, END_RESERVE * 60.0 * minutes)
     final = started + 60.0 * minutes

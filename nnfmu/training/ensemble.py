@@ -38,6 +38,7 @@ from nnfmu.training.config import TrainConfig
 from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
+from nnfmu.training.resources import usable_cores
 from nnfmu.training.trainer import _as_train_config, prepare_dataset, train
 
 KEEP = ("best", "ensemble", "select")
@@ -170,7 +171,7 @@ def _train_in_processes(work: list, jobs: int, device, threads: int | None, line
 
 def _jobs(jobs: int | None, k: int) -> int:
     if jobs is None:
-        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        jobs = usable_cores()
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs must be a positive integer number of processes, got {jobs!r}")
     return min(jobs, k)

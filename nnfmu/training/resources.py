@@ -145,6 +145,11 @@ def cuda_visible(device: str | None) -> str | None:
     return name.partition(":")[2] if name.startswith("cuda:") else None
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity where the system says, else the machine's count)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def check_threads(threads: int | None) -> int:
     """``threads`` as a positive int (None: the policy's :data:`DEFAULT_THREADS`); ConfigError otherwise."""
     if threads is None:
