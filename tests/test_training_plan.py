@@ -96,6 +96,10 @@ def test_an_ensemble_drops_a_seed_that_never_trained_and_says_so():
     assert any("dropped seed 1" in n and "never improved" in n for n in notes)
     alone, valid, notes = seeds_module._ensemble_of_trained(models, [dict(r, best_epoch=0) for r in rows], ds.test, 1)
     assert alone is models[0] and valid == 0.5 and any("kept seed 0 alone" in n for n in notes)
+    # an ensemble worse on validation than where the seeds started is not kept: the best seed is
+    started = [dict(r, start_valid_nrmse=1e-9) for r in rows]
+    alone, valid, notes = seeds_module._ensemble_of_trained(models, started, ds.test, 1)
+    assert alone is models[0] and valid == 0.5 and any("above the seeds' start" in n for n in notes)
 
 
 @pytest.mark.parametrize("arch", ("gru", "mlp", "tcn"))

@@ -253,6 +253,8 @@ def _seed_row(seed: int, path: Path) -> dict:
             "best_epoch": ckpt.get("best_epoch"), "epochs_run": summary.get("epochs_run"),
             "stop_reason": summary.get("stop_reason") or "failed",
             "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
+            "start_valid_nrmse": next((h.get("valid_nrmse") for h in ckpt.get("history", []) if h.get("epoch") == 0),
+                                      None),
             "error": _error_file(path).read_text().strip() if _error_file(path).exists() else None}
 
 
@@ -261,7 +263,9 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
 
     A seed whose best epoch is 0 never trained: averaged in, its untrained output would pull the ensemble back
     towards the start (a random network, or the linear model of a linear path). With fewer than two trained
-    seeds the best seed on validation is kept alone.
+    seeds, or when the ensemble's validation NRMSE is above the seeds' start (epoch 0: the linear model of a
+    linear path), the best seed on validation is kept alone: like one training, the kept model is never worse
+    on validation than where training started.
     """
     trained = [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0]
     notes = [f"dropped seed {rows[i]['seed']} from the ensemble: it never improved on its start on validation "
@@ -273,6 +277,12 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
         notes.append(f"fewer than two seeds trained: kept seed {rows[best]['seed']} alone instead of an ensemble")
         return models[best], rows[best]["best_valid_nrmse"], notes
     model, score = ensemble_score([models[i] for i in trained], valid, context=n)
+    starts = [rows[i]["start_valid_nrmse"] for i in trained if rows[i].get("start_valid_nrmse") is not None]
+    if starts and not score <= min(starts):
+        best = min(trained, key=lambda i: rows[i]["best_valid_nrmse"])
+        notes.append(f"the ensemble's validation NRMSE {score:.4f} is above the seeds' start ({min(starts):.4f}): "
+                     f"kept seed {rows[best]['seed']} alone")
+        return models[best], rows[best]["best_valid_nrmse"], notes
     return model, score, notes
 
 
