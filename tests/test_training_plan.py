@@ -174,24 +174,29 @@ def test_the_train_cli_says_join_no_join_or_nothing():
         [None, True, False]
 
 
-def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_the_selection(tmp_path, capsys,
+def test_train_cli_at_its_defaults_trains_two_seeds_side_by_side_and_keeps_their_ensemble(tmp_path, capsys,
                                                                                           monkeypatch):
-    """With the budget left to the plan and a core idle, two seeds train at once; --seeds 1 and --epochs train one."""
+    """With the budget left to the plan and a core idle, two seeds train at once, their ensemble kept; --seeds 1 and
+    --epochs train one."""
     from nnfmu.cli import main
-    from nnfmu.training import resources
     from nnfmu.data import save_dataset
     from nnfmu.models import load_checkpoint
+    from nnfmu.training import resources
 
     data = save_dataset(one_record(300, 100), tmp_path / "d")
     base = ["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--patience", "1", "--quiet"]
     monkeypatch.setattr(resources, "usable_cores", lambda: 2)
     assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
     out = capsys.readouterr().out
-    assert "plan: seeds: 2 trained side by side" in out and "kept the selection of 2 seeds" in out
+    assert "plan: seeds: 2 trained side by side" in out and "kept the ensemble of 2 seeds" in out
     assert sorted(p.name for p in (tmp_path / "a.seeds").iterdir()) == ["seed-0.pt", "seed-1.pt"]
     summary = load_checkpoint(tmp_path / "a.pt")["summary"]
-    assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1]
-    assert summary["best_valid_nrmse"] <= min(r["best_valid_nrmse"] for r in summary["seeds"]) + 1e-9
+    assert summary["keep"] == "ensemble" and [r["seed"] for r in summary["seeds"]] == [0, 1]
+    trained = [r for r in summary["seeds"] if r["best_epoch"] > 0]  # averaged; never above the start on validation
+    members = load_checkpoint(tmp_path / "a.pt")["model_config"]["members"]
+    above = any("above the seeds' start" in n for n in summary["notes"])
+    assert members == (2 if len(trained) == 2 and not above else 1)
+    assert summary["best_valid_nrmse"] <= min(r["start_valid_nrmse"] for r in summary["seeds"]) + 1e-9
     from nnfmu.cli.info import describe, render
 
     shown = " ".join(render(describe(tmp_path / "a.pt")).split())  # nnfmu info: each seed in a few words

@@ -114,10 +114,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "(default: 2 side by side when the plan chooses the budget, no --epochs or "
                             "--max-minutes, and a core is idle beside the training, else 1; --seeds 1: one network)")
     seeds.add_argument("--keep", choices=["ensemble", "best", "select"],
-                       help="with --seeds: the ensemble of the K networks (their mean output fed back; one FMU; "
-                            "the default with --seeds), the best on validation, or select: the best, joined by "
-                            "others only where that lowers the validation NRMSE by 1 %% (the default for the "
-                            "plan's seeds)")
+                       help="the ensemble of the K networks (their mean output fed back; one FMU; default), the "
+                            "best on validation, or select: the best, joined by others only where that lowers the "
+                            "validation NRMSE by 1 %%")
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
