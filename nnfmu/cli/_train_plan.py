@@ -10,8 +10,8 @@ A record with ``data_plan="budget"`` (the hybrid) trains on whole trajectories u
 With the budget left to the plan (no ``--epochs``, ``--max-minutes``, ``--seeds``, ``--resume``), on the CPU
 and with a core idle beside the training (one torch thread each), :data:`DEFAULT_SEEDS` seeds train side by side
 (:func:`planned_seeds`) and their ensemble is kept (``--keep ensemble``, as for ``--seeds``): the same wall
-time, one FMU, and less of the seed-to-seed variance that decided single cells of the defaults table. On two
-seeds, validation picked the seed that was worse on test in 7 of the 10 cells where averaging and picking
+time, one FMU, and less of the seed-to-seed variance that decided single cells of the defaults table. Picking
+the seed better on validation instead scored worse on test in 9 of the 12 cells where picking and averaging
 differed (docs/accuracy.md).
 """
 
