@@ -29,14 +29,15 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
     from nnfmu.cli import Terminated
+    from nnfmu.training.ensemble import seeds_folder
 
     try:
         result = train_seeds(ds, model_config, train_config, seeds=seeds, keep=keep, out=out, jobs=args.jobs,
                              progress=not args.quiet, device=device, threads=args.threads, linear=linear,
                              overwrite=args.force)
     except (KeyboardInterrupt, Terminated):
-        print(f"interrupted: the seeds' checkpoints are kept in {out.parent / f'{out.stem}.seeds'}; run the same "
-              "command again to continue them")
+        print(f"interrupted: the seeds' checkpoints are kept in {seeds_folder(out)}; run the same command again "
+              "to continue them")
         raise
     for note in result.notes:
         print(f"note: {note}")

@@ -217,15 +217,16 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.limits import MAX_BATCH_SIZE, check_at_most
     from nnfmu.models import load_checkpoint
     from nnfmu.models.size import check_network_size
+    from nnfmu.training.ensemble import seeds_folder
 
     args.started = time.monotonic()  # a --max-minutes search counts its budget from here
     out = Path(args.out)
     check_writable(out)  # before the data are loaded and the network built
     device = check_resource_options(args)
     ds = load_dataset(args.data)
-    if args.resume and not out.exists() and (out.parent / f"{out.stem}.seeds").is_dir():
-        raise ConfigError(f"{out} is written when its seeds in {out.parent / f'{out.stem}.seeds'} are done: run the "
-                          "same command again without --resume, and the seeds continue")
+    if args.resume and not out.exists() and seeds_folder(out).is_dir():
+        raise ConfigError(f"{out} is written when its seeds in {seeds_folder(out)} are done: run the same command "
+                          "again without --resume, and the seeds continue")
     stored = load_checkpoint(out) if args.resume else None
     if stored is None and out.exists() and not args.force:
         raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")

@@ -86,10 +86,19 @@ class SeedsResult:
         return {"mean": float(np.mean(values)), "min": float(min(values)), "max": float(max(values))}
 
 
+def seeds_folder(out: Path) -> Path:
+    """The folder of the member checkpoints of ``out``: ``<out stem>.seeds/`` beside it."""
+    return out.parent / f"{out.stem}.seeds"
+
+
 def seed_paths(out: Path, seeds: list[int]) -> list[Path]:
-    """Where the member checkpoints of ``out`` live: ``<out stem>.seeds/seed-<s>.pt`` beside it."""
-    folder = out.parent / f"{out.stem}.seeds"
-    return [folder / f"seed-{s}.pt" for s in seeds]
+    """Where the member checkpoints of ``out`` live: ``<out stem>.seeds/seed-<s>.pt``."""
+    return [seeds_folder(out) / f"seed-{s}.pt" for s in seeds]
+
+
+def _trained(rows: list) -> list[int]:
+    """The indices of the seeds that improved on their start (best epoch > 0)."""
+    return [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0]
 
 
 def _error_file(path: Path) -> Path:
@@ -267,7 +276,7 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
     linear path), the best seed on validation is kept alone: like one training, the kept model is never worse
     on validation than where training started.
     """
-    trained = [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0]
+    trained = _trained(rows)
     notes = [f"dropped seed {rows[i]['seed']} from the ensemble: it never improved on its start on validation "
              f"(best epoch 0, validation NRMSE {rows[i]['best_valid_nrmse']:.4f})"
              for i in range(len(rows)) if i not in trained]
@@ -288,7 +297,7 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
 
 def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list]:
     """The greedy selection over the seeds that improved on their start (all, if none did), best first."""
-    pool = [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0] or list(range(len(rows)))
+    pool = _trained(rows) or list(range(len(rows)))
     pool.sort(key=lambda i: rows[i]["best_valid_nrmse"])
     picked = select_ensemble([models[i] for i in pool], valid, context=n, max_members=len(pool))
     seeds = [rows[pool[c]]["seed"] for c in picked.chosen]
