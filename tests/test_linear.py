@@ -133,11 +133,11 @@ def test_refinement_respects_the_spectral_radius_limit(noisy_data):
 
 def test_refinement_that_hurts_validation_is_discarded(noisy_data):
     """Validation outputs made by the subspace model itself: any refinement can only be worse there."""
-    subspace = identify_linear(noisy_data, order=3, refine=False)
+    subspace = identify_linear(noisy_data, order=3, refine=False, refit=False)
     valid = noisy_data.valid
     made = [subspace.simulate(u, y[0]) for u, y in zip(valid.u, valid.y)]
     rigged = noisy_data.replace(splits={**noisy_data.splits, "valid": type(valid)(valid.u, tuple(made))})
-    model = identify_linear(rigged, order=3, max_evaluations=300)
+    model = identify_linear(rigged, order=3, max_evaluations=300, refit=False)  # the choice itself, before a refit
     report = model.info["refinement"]
     assert report["cost_after"] < report["cost_before"]  # it did fit the training data better ...
     assert report["nrmse_after"] > model.info["nrmse_subspace"] and not report["accepted"]  # ... but not valid
@@ -159,12 +159,12 @@ def test_identification_stops_the_refinement_on_the_validation_nrmse(noisy_data,
         return real_refine(start, *args, **kwargs)
 
     monkeypatch.setattr(identify, "refine", spy)
-    model = identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=4)
+    model = identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=4, refit=False)
     start, stop = seen[0]
     assert (stop.every, stop.patience) == (3, 4)
     assert stop.score(start) == model.info["nrmse_subspace"]  # the score is the validation free-run NRMSE
     assert model.info["nrmse_valid"] == model.info["refinement"]["nrmse_after"] <= model.info["nrmse_subspace"]
-    identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=None)
+    identify_linear(noisy_data, order=2, max_evaluations=300, refine_patience=None, refit=False)
     assert seen[1][1] is None  # None: no early stop, the run goes to convergence or the limit
     with pytest.raises(ConfigError, match="refine_patience must be a positive integer"):
         LinearConfig(refine_patience=0)
@@ -316,8 +316,8 @@ def test_identification_runs_on_the_configured_blas_threads(noisy_data, monkeypa
     monkeypatch.setattr(identify, "refine", spy)
     with threadpool_limits(limits=2, user_api="blas"):
         outer = blas_threads()
-        one = identify_linear(noisy_data, order=2, max_evaluations=20)
-        two = identify_linear(noisy_data, order=2, max_evaluations=20, threads=2)
+        one = identify_linear(noisy_data, order=2, max_evaluations=20, refit=False)
+        two = identify_linear(noisy_data, order=2, max_evaluations=20, threads=2, refit=False)
         after = blas_threads()
     assert seen[0] == {1}
     assert seen[1] == outer and after == outer  # threads=2 runs on the caller's two; the caller's setting is restored

@@ -108,3 +108,22 @@ def test_one_record_holds_out_the_tail_train_holds_out_so_networks_start_from_th
     assert "free-run NRMSE on train" in capsys.readouterr().out  # the whole record, the order chosen on it
     assert main(["linear", "--data", str(data), "--valid-fraction", "1.5", "-o", str(tmp_path / "x.fmu")]) == 2
     assert "--valid-fraction" in capsys.readouterr().err and not (tmp_path / "x.fmu").exists()
+
+
+def test_one_record_is_refitted_whole_after_the_order_is_chosen_on_its_tail(tmp_path, capsys):
+    """The tail chooses the order and the refinement's length; the model is then fitted on the whole record."""
+    ds = _system_data()
+    record = [np.concatenate(ds.train.u + ds.valid.u)], [np.concatenate(ds.train.y + ds.valid.y)]
+    one = from_arrays(Ts=ds.Ts, u_train=record[0], y_train=record[1], u_test=list(ds.test.u), y_test=list(ds.test.y))
+    data = save_dataset(one, tmp_path / "one")
+    assert main(["linear", "--data", str(data), "--save", str(tmp_path / "refit.json"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    n = len(record[0][0])
+    assert f"refit on the training and validation data together ({n} samples in 1 record, order" in out
+    assert main(["linear", "--data", str(data), "--no-refit", "--save", str(tmp_path / "held.json"), "--quiet"]) == 0
+    assert "refit on" not in capsys.readouterr().out
+    refit, held = load_linear(tmp_path / "refit.json"), load_linear(tmp_path / "held.json")
+    assert refit.n_x == held.n_x  # the order chosen on the tail is kept
+    assert refit.info["refit"]["samples"] == n and "refit" not in held.info
+    assert not np.allclose(refit.system.A, held.system.A)  # estimated again, on 100 % instead of 75 %
+    assert refit.info["refit"]["nrmse_valid_before"] == pytest.approx(held.info["nrmse_valid"], rel=1e-12)

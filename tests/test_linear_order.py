@@ -76,7 +76,7 @@ def test_without_a_validation_split_the_subspace_scores_decide(robot_like, monke
     assert model.info["scored_on"] == "train" and model.info["order_candidates"] == {}
     assert calls == [model.n_x]
     calls.clear()
-    model = identify_linear(robot_like, max_evaluations=50)
+    model = identify_linear(robot_like, max_evaluations=50, refit=False)  # the choice, before a refit
     assert sorted(calls[:-1]) == sorted(int(n) for n in model.info["order_candidates"]) and calls[-1] == 4
 
 

@@ -43,7 +43,7 @@ def prepare(args, ds, model_config, train_config, given: dict):
     carved, notes = prepare_dataset(ds, train_config)
     for note in notes:
         print(f"note: {note}")
-    linear = _linear_start(args, carved, model_config)
+    linear = _linear_start(args, carved, model_config, ds.train if ds.valid is None and ds.train.n_traj == 1 else None)
     if linear is not None:
         model_config = model_config.replace(linear_order=linear.n_x)
     plan = plan_training(ds, {**given, "valid_fraction": train_config.valid_fraction}, linear=linear,
@@ -53,8 +53,11 @@ def prepare(args, ds, model_config, train_config, given: dict):
     return carved, model_config, train_config.replace(**plan.changes), linear
 
 
-def _linear_start(args, ds, model_config):
-    """The identified linear model the network starts from, or None (``--linear-path off``, increment mode)."""
+def _linear_start(args, ds, model_config, record=None):
+    """The identified linear model the network starts from, or None (``--linear-path off``, increment mode).
+
+    ``record``: the one training record the validation tail was cut from, which the linear model is refitted
+    on after choosing its order (:mod:`nnfmu.linear.identify`, step 6)."""
     from nnfmu.linear import LinearConfig, identify_linear, load_linear
     from nnfmu.models import architectures
 
@@ -69,10 +72,13 @@ def _linear_start(args, ds, model_config):
               "to it, starting at zero")
         return linear
     t0 = time.process_time()
-    linear = identify_linear(ds, LinearConfig(), progress=False)
+    linear = identify_linear(ds, LinearConfig(), progress=False, refit_on=record)
+    refit = linear.info.get("refit")
+    score = (f"{refit['nrmse_valid_before']:.4f}, then refitted on the training and validation data together" if refit
+             else f"{linear.info['nrmse_valid']:.4f}")
     print(f"plan: linear path of {linear.n_x} states, the identified linear baseline (validation free-run NRMSE "
-          f"{linear.info['nrmse_valid']:.4f}, {time.process_time() - t0:.1f} CPU-s); the network learns a "
-          "correction to it, starting at zero (--linear-path off: the network alone)")
+          f"{score}; {time.process_time() - t0:.1f} CPU-s); the network learns a correction to it, starting at "
+          "zero (--linear-path off: the network alone)")
     return linear
 
 

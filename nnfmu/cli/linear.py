@@ -39,6 +39,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="one training record without a valid split: hold out its last F for validation (default: "
                         "the tail `nnfmu train` holds out, so that this is the model its networks start from; "
                         "0: fit the whole record and choose the order on it)")
+    p.add_argument("--refit", action=argparse.BooleanOptionalAction, default=True,
+                   help="after choosing the order and the refinement's length on validation, estimate the model "
+                        "again on the training and validation data together (default; --no-refit keeps the model "
+                        "fitted without the validation data)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
                    help="BLAS threads (default 1: faster here, and the result does not depend on the core count)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
@@ -65,6 +69,11 @@ def _summary(model, dataset) -> list[str]:
         verdict = "kept" if refinement["accepted"] else "discarded, it was worse"
         lines[-1] += (f", refined {refinement['nrmse_after']:.4f} ({verdict}; "
                       f"{refinement['evaluations']} evaluations)")
+    refit = info.get("refit")
+    if refit:
+        lines.append(f"refit on the training and validation data together ({refit['samples']} samples in "
+                     f"{refit['records']} record{'s' if refit['records'] > 1 else ''}, order {model.n_x}, "
+                     f"{refit['evaluations']} refinement evaluations as chosen on validation; --no-refit: without)")
     lines.append(f"spectral radius {info['spectral_radius']:.6f}; init rule '{model.init}'")
     if "test" in dataset.splits:
         test = dataset.test
@@ -86,18 +95,20 @@ def _plan(args: argparse.Namespace, config, dataset) -> str:
 
 
 def _held_out(dataset, fraction: float | None):
-    """``dataset`` with the validation tail of its one training record carved as ``nnfmu train`` carves it.
+    """``(dataset, record)``: ``dataset`` with the validation tail of its one training record carved as ``nnfmu
+    train`` carves it, and that whole record (for the refit); else ``(dataset, None)``.
 
     Only a dataset with one training record and no valid split changes; ``fraction`` None: the plan's tail
     (:func:`nnfmu.training.plan.valid_fraction`), 0: none."""
     from nnfmu.training.plan import valid_fraction, validation_line
 
     if dataset.valid is not None or dataset.train.n_traj != 1 or fraction == 0.0:
-        return dataset
+        return dataset, None
     fraction = valid_fraction(dataset) if fraction is None else fraction
     print(f"linear: {validation_line(dataset, fraction)}; the order is chosen and the refinement stopped on it, "
-          "as in `nnfmu train` (--valid-fraction 0: the whole record)")
-    return dataset.with_validation(fraction)
+          "as in `nnfmu train`, then the model is fitted again on the whole record (--valid-fraction 0: the "
+          "whole record throughout)")
+    return dataset.with_validation(fraction), dataset.train
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -115,15 +126,15 @@ def _run(args: argparse.Namespace) -> int:
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           order_candidates=args.order_candidates, refine=not args.no_refine,
                           refine_x0=args.refine_x0, refine_method=args.refine_method,
-                          max_evaluations=args.max_evaluations, threads=args.threads)
+                          max_evaluations=args.max_evaluations, threads=args.threads, refit=args.refit)
     if args.out:
         from nnfmu.cli.export import check_fmu_options
 
         check_fmu_options(args)
-    dataset = _held_out(load_dataset(args.data), args.holdout)
+    dataset, record = _held_out(load_dataset(args.data), args.holdout)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
     print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
-    model = identify_linear(dataset, config, progress=not args.quiet)
+    model = identify_linear(dataset, config, progress=not args.quiet, refit_on=record)
     print("\n".join(_summary(model, dataset)))
     with all_or_nothing(args.out, args.save):  # a failing --save removes the FMU just written, and the reverse
         if args.out:
