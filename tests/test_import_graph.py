@@ -31,6 +31,7 @@ LAYERS = (
     ("export", {"export"}),
     ("hybrid", {"hybrid"}),
     ("node", {"node"}),
+    ("ss", {"ss"}),
     ("study", {"study"}),
     ("cli", {"cli"}),
 )

@@ -141,8 +141,11 @@ class Architecture:
         True: windows, batch, budget and validation tail, and ``--max-minutes`` alone searches; ``"budget"``: the
         same on whole trajectories and without the search (a model whose initial state from ``y0`` holds at a
         record's start only, such as the hybrid's physics state); False: nothing (the TrainConfig defaults).
-    linear_path : bool
-        Whether it may sit on a linear path (``linear_order > 0``), identified by ``nnfmu train`` from the data.
+    linear_path : bool or "own"
+        Whether it may sit on a linear path (``linear_order > 0``), identified by ``nnfmu train`` from the data:
+        True: the model is wrapped as a correction on the path (:class:`~nnfmu.models.linear_path.LinearPathStepModel`);
+        ``"own"``: the model holds the identified linear model itself (it has ``PATH_ARRAYS`` and ``set_path``, as
+        the subspace-encoder state-space model, :mod:`nnfmu.ss`); False: never.
     strategies : tuple of str
         The training strategies it takes (the first is the default).
     dtype : str
@@ -168,7 +171,7 @@ class Architecture:
     preset: Mapping[str, Any] = field(default_factory=dict)
     search_rank: int | None = None
     data_plan: bool | str = True
-    linear_path: bool = True
+    linear_path: bool | str = True
     strategies: tuple[str, ...] = ("parallel", "series-parallel")
     dtype: str = "float32"
     counting_config: Ref | None = None
@@ -181,6 +184,9 @@ class Architecture:
         if self.data_plan not in (True, False, "budget"):
             raise ConfigError(f"architecture {self.name!r}: data_plan must be True, False or 'budget', "
                               f"got {self.data_plan!r}")
+        if self.linear_path not in (True, False, "own"):
+            raise ConfigError(f"architecture {self.name!r}: linear_path must be True, False or 'own', "
+                              f"got {self.linear_path!r}")
         if (self.casadi_step is None) != (self.casadi_init is None):
             raise ConfigError(f"architecture {self.name!r}: give casadi_step and casadi_init together")
         if (self.to_casadi is None) != (self.casadi_model is None):

@@ -42,10 +42,12 @@ def member_configs(config: ModelConfig) -> list[ModelConfig]:
 def single_model_class(config: ModelConfig) -> type:
     """The class of one network of ``config``: the architecture's own, or on a linear path (``linear_order > 0``)."""
     if getattr(config, "linear_order", 0):
-        if not architectures.architecture(config.arch).linear_path:
+        holds = architectures.architecture(config.arch).linear_path
+        if not holds:
             raise ShapeError(f"a {config.arch} model cannot sit on a linear path (its record says "
                              "linear_path=False); set linear_order=0")
-        return LinearPathStepModel
+        if holds != "own":  # a model that holds its path itself is built by its own class
+            return LinearPathStepModel
     return architectures.model_class(config.arch)
 
 

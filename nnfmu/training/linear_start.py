@@ -1,7 +1,8 @@
 """Start a network on its linear path (``ModelConfig.linear_order > 0``) at the identified linear baseline.
 
-:func:`start_linear_path` gives each :class:`~nnfmu.models.linear_path.LinearPathStepModel` in a fresh model
-(one network or an ensemble's members) the linear model's matrices in its normalised units
+:func:`start_linear_path` gives each holder of a linear path in a fresh model (a
+:class:`~nnfmu.models.linear_path.LinearPathStepModel`, or a model that holds its path itself, as :mod:`nnfmu.ss`'s;
+one network or an ensemble's members) the linear model's matrices in its normalised units
 (:func:`path_arrays`), with every linear state scaled to unit size over the training data; the correction
 starts at zero, so the fresh model simulates exactly the linear model.
 """
@@ -53,9 +54,16 @@ def start_linear_path(model: StepModel, dataset: Dataset, linear=None):
         raise ConfigError(f"a linear path starts from the 'estimate' initial-state rule, got {linear.init!r}; "
                           "identify the linear model with init='estimate'")
     scale = linear_state_scale(linear, dataset.train)
-    for path in (m for m in model.modules() if isinstance(m, LinearPathStepModel)):
+    for path in path_holders(model):
         path.set_path(path_arrays(linear, path, scale))
     return linear
+
+
+def path_holders(model: StepModel) -> list[StepModel]:
+    """The modules of ``model`` that hold a linear path: they name their arrays in ``PATH_ARRAYS`` and take them
+    in ``set_path`` (:class:`LinearPathStepModel`, and models whose record says ``linear_path="own"``)."""
+    return [m for m in model.modules() if isinstance(m, StepModel) and hasattr(m, "PATH_ARRAYS")
+            and callable(getattr(m, "set_path", None))]
 
 
 def path_arrays(linear, path: LinearPathStepModel, state_scale: np.ndarray) -> dict:
