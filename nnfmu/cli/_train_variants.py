@@ -20,7 +20,7 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
     their spread printed."""
     from nnfmu.training import train_seeds
 
-    keep = args.keep or "ensemble"
+    keep = args.keep or "select"
     seeds = args.seeds if seeds is None else seeds
 
     if args.resume:

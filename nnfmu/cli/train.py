@@ -111,12 +111,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out "
-                            "(default: 2 side by side when the plan chooses the budget, no --epochs or "
-                            "--max-minutes, and a core is idle beside the training, else 1; --seeds 1: one network)")
-    seeds.add_argument("--keep", choices=["ensemble", "best", "select"],
-                       help="the ensemble of the K networks (their mean output fed back; one FMU; default), the "
-                            "best on validation, or select: the best, joined by others only where that lowers the "
-                            "validation NRMSE by 1 %%")
+                            "(default: one per usable core, at least 2 and at most 8, side by side, when the plan "
+                            "chooses the budget, no --epochs or --max-minutes, and a core is idle beside the "
+                            "training, else 1; --seeds 1: one network)")
+    seeds.add_argument("--keep", choices=["select", "best", "ensemble"],
+                       help="select (default): the seed best on validation, joined by others only where their "
+                            "ensemble lowers the validation NRMSE by 1 %%; best: the best on validation alone; "
+                            "ensemble: all K (their mean output fed back; one FMU)")
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")

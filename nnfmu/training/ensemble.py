@@ -187,7 +187,7 @@ def _jobs(jobs: int | None, k: int) -> int:
 
 
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
-                seeds: int = 3, keep: str = "ensemble", out: str | os.PathLike, jobs: int | None = None,
+                seeds: int = 3, keep: str = "select", out: str | os.PathLike, jobs: int | None = None,
                 progress: bool = False, device="auto", threads: int | None = None, linear=None,
                 overwrite: bool = False) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
@@ -200,8 +200,8 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     train_config : TrainConfig, optional
     seeds : int
         K >= 2 seeds.
-    keep : {'best', 'ensemble', 'select'}
-        See the module docstring.
+    keep : {'select', 'best', 'ensemble'}
+        See the module docstring (default 'select': chosen on validation alone).
     out : path
         The kept model's checkpoint; members go to ``<stem>.seeds/``. Finished members are not
         trained again and unfinished ones resume, so a stopped call continues where it was.
