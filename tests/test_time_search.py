@@ -38,7 +38,7 @@ def test_trial_zero_is_the_plain_training_and_the_rest_take_the_architectures_in
     model, train = ModelConfig(arch="gru", n_u=2, n_y=1), TrainConfig(truncate=400)
     points = trial_points(model, train, set(), 12, seed=0, longest=5000)
     assert points[0] == {"arch": "gru", "hidden": 32, "lr": 3e-3, "feedback_noise": 0.0, "truncate": 400}
-    assert [p["arch"] for p in points[:5]] == list(arch_order()) == ["gru", "lstm", "tcn", "mlp", "rnn"]  # gru (given as the base) first
+    assert [p["arch"] for p in points[:6]] == list(arch_order()) == ["gru", "lstm", "tcn", "mlp", "rnn", "ss"]  # gru first
     assert len({tuple(p.values()) for p in points}) == 12  # no point twice
     assert all(p["hidden"] in HIDDEN and p["lr"] in LRS and p["feedback_noise"] in NOISES
                and p["truncate"] in (200, 400, 800) for p in points)

@@ -264,3 +264,31 @@ def test_a_terminated_default_training_stops_its_seeds_and_keeps_them(tmp_path):
 
     kept = [load_checkpoint(m) for m in members]  # stopped by the signal, not trained to their end
     assert all("resume" in c and "stop_reason" not in (c.get("summary") or {}) for c in kept)
+
+
+def test_validation_blocks_spread_over_one_record(tmp_path, capsys):
+    """--valid-blocks K holds out --valid-fraction of one record as K blocks spread over it (blocked
+    cross-validation's hold-out), not its tail; the training pieces are what lies between them, nothing lost."""
+    from nnfmu.cli import main
+    from nnfmu.data import save_dataset
+    from nnfmu.errors import DataError
+    from nnfmu.models import load_checkpoint
+    from nnfmu.training import TrainConfig
+    from nnfmu.training.trainer import prepare_dataset
+
+    ds = one_record(2000, 200)
+    carved, notes = prepare_dataset(ds, TrainConfig(valid_fraction=0.2, valid_blocks=4))
+    assert list(carved.valid.lengths) == [100] * 4 and list(carved.train.lengths) == [400] * 4
+    starts = [int(np.flatnonzero((ds.train.u[0] == v[0]).all(axis=1))[0]) for v in carved.valid.u]
+    assert starts == [400, 900, 1400, 1900] and "4 blocks spread over the training record" in notes[0]
+    assert carved.train.n_samples + carved.valid.n_samples == 2000  # every sample is in one split or the other
+    tail, _ = prepare_dataset(ds, TrainConfig(valid_fraction=0.2))
+    np.testing.assert_array_equal(tail.valid.u[0], ds.train.u[0][1600:])  # 1 block: the tail, as before
+    with pytest.raises(DataError, match="fewer blocks"):
+        ds.with_validation(0.2, blocks=1000)
+    data = save_dataset(ds, tmp_path / "d")
+    assert main(["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--epochs", "2", "--quiet",
+                 "--valid-fraction", "0.2", "--valid-blocks", "4", "-o", str(tmp_path / "m.pt")]) == 0
+    assert "validating on 4 blocks spread over the training record, 20% of it" in capsys.readouterr().out
+    saved = load_checkpoint(tmp_path / "m.pt")["train_config"]
+    assert (saved["valid_fraction"], saved["valid_blocks"]) == (0.2, 4)

@@ -86,7 +86,7 @@ RULES: dict[str | tuple[str, str], Rule] = {
     # import
     "Ts": Rule(0, 366 * 86400.0, lo_open=True, fix="give the sample time in seconds"),
     "resample": Rule(1, 1_000_000), "valid_fraction": Rule(0, 1, lo_open=True, hi_open=True, fix="e.g. 0.2"),
-    "valid_trajectories": Rule(1, 1_000_000),
+    "valid_trajectories": Rule(1, 1_000_000), "valid_blocks": Rule(1, 1000, fix="a few blocks, e.g. 4"),
 }
 
 

@@ -42,7 +42,7 @@ def prepare(args, ds, model_config, train_config, given: dict):
     init_window = model_config.init_window
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
         train_config = train_config.replace(valid_fraction=frac)
-        print(f"plan: {validation_line(ds, frac)}")
+        print(f"plan: {validation_line(ds, frac, train_config.valid_blocks)}")
     carved, notes = prepare_dataset(ds, train_config)
     for note in notes:
         print(f"note: {note}")

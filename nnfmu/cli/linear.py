@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="one training record without a valid split: hold out its last F for validation (default: "
                         "the tail `nnfmu train` holds out, so that this is the model its networks start from; "
                         "0: fit the whole record and choose the order on it)")
+    p.add_argument("--valid-blocks", type=int, default=1, metavar="K",
+                   help="with one record: hold out --valid-fraction as K blocks spread over it instead of its tail "
+                        "(default 1), as `nnfmu train --valid-blocks K` does")
     p.add_argument("--refit", action=argparse.BooleanOptionalAction, default=True,
                    help="after choosing the order and the refinement's length on validation, estimate the model "
                         "again on the training and validation data together (default; --no-refit keeps the model "
@@ -94,7 +97,7 @@ def _plan(args: argparse.Namespace, config, dataset) -> str:
     return line + f", then up to {config.evaluations} refinement evaluations (may take minutes)"
 
 
-def _held_out(dataset, fraction: float | None):
+def _held_out(dataset, fraction: float | None, blocks: int = 1):
     """``(dataset, record)``: ``dataset`` with the validation tail of its one training record carved as ``nnfmu
     train`` carves it, and that whole record (for the refit); else ``(dataset, None)``.
 
@@ -105,10 +108,10 @@ def _held_out(dataset, fraction: float | None):
     if dataset.valid is not None or dataset.train.n_traj != 1 or fraction == 0.0:
         return dataset, None
     fraction = valid_fraction(dataset) if fraction is None else fraction
-    print(f"linear: {validation_line(dataset, fraction)}; the order is chosen and the refinement stopped on it, "
-          "as in `nnfmu train`, then the model is fitted again on the whole record (--valid-fraction 0: the "
+    print(f"linear: {validation_line(dataset, fraction, blocks)}; the order is chosen and the refinement stopped on "
+          "it, as in `nnfmu train`, then the model is fitted again on the whole record (--valid-fraction 0: the "
           "whole record throughout)")
-    return dataset.with_validation(fraction), dataset.train
+    return dataset.with_validation(fraction, blocks=blocks), dataset.train
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -131,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
         from nnfmu.cli.export import check_fmu_options
 
         check_fmu_options(args)
-    dataset, record = _held_out(load_dataset(args.data), args.holdout)
+    dataset, record = _held_out(load_dataset(args.data), args.holdout, args.valid_blocks)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
     print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet, refit_on=record)

@@ -134,6 +134,25 @@ class Trajectories:
         return Trajectories((np.concatenate(self.u),), (np.concatenate(self.y),))
 
 
+def _blocks(u: np.ndarray, y: np.ndarray, fraction: float, blocks: int) -> tuple[Trajectories, Trajectories]:
+    """``(train, valid)`` of one record: ``blocks`` validation blocks of ``fraction / blocks``, one at the end of each
+    of ``blocks`` equal segments (``blocks = 1``: the last ``fraction`` of the record)."""
+    if isinstance(blocks, bool) or not isinstance(blocks, (int, np.integer)) or blocks < 1:
+        raise DataError(f"validation blocks must be a positive integer, got {blocks!r}")
+    n = len(u)
+    edges = [int(round(i * n / blocks)) for i in range(blocks + 1)]
+    parts = {"train": ([], []), "valid": ([], [])}
+    for start, end in zip(edges[:-1], edges[1:]):
+        cut = end - int(round(fraction * (end - start)))
+        if cut - start < 2 or end - cut < 2:
+            raise DataError(f"{blocks} validation blocks of {fraction:.0%} leave pieces shorter than 2 samples of "
+                            f"a record of {n}; choose fewer blocks")
+        for split, (lo, hi) in (("train", (start, cut)), ("valid", (cut, end))):
+            parts[split][0].append(u[lo:hi])
+            parts[split][1].append(y[lo:hi])
+    return Trajectories(*map(tuple, parts["train"])), Trajectories(*map(tuple, parts["valid"]))
+
+
 def _as_trajectory_list(arr, what: str) -> list[np.ndarray]:
     """Accept a 3-D array ``(n_traj, n_steps, n)``, a 2-D array ``(n_steps, n)`` or a list of 2-D arrays.
 
@@ -260,13 +279,16 @@ class Dataset:
     def replace(self, **changes) -> "Dataset":
         return dataclasses.replace(self, **changes)
 
-    def with_validation(self, fraction: float | None = 0.1, seed: int = 0, *, n_traj: int | None = None) -> "Dataset":
+    def with_validation(self, fraction: float | None = 0.1, seed: int = 0, *, n_traj: int | None = None,
+                        blocks: int = 1) -> "Dataset":
         """Return a copy whose ``valid`` split is carved out of ``train``.
 
         With several training trajectories, ``n_traj`` of them, or else ``fraction`` of them (at
         least one, at most all but one), are chosen at random with ``seed``. A single training
-        trajectory is cut in time instead: its last ``fraction`` becomes the validation record.
-        An existing ``valid`` split is kept unchanged.
+        trajectory is cut in time instead: its last ``fraction`` becomes the validation record, or
+        with ``blocks = K > 1``, ``K`` blocks of ``fraction / K`` each, spread over the record (the
+        record is cut into ``K`` equal segments and each segment's last part is a validation block;
+        the training split is the ``K`` pieces before them). An existing ``valid`` split is kept unchanged.
         """
         if self.valid is not None:
             return self
@@ -288,10 +310,7 @@ class Dataset:
             splits["valid"] = train.subset(sorted(order[:n_valid]))
             splits["train"] = train.subset(sorted(order[n_valid:]))
         else:
-            n = len(train.u[0])
-            cut = int(round((1.0 - fraction) * n))
-            splits["train"] = Trajectories((train.u[0][:cut],), (train.y[0][:cut],))
-            splits["valid"] = Trajectories((train.u[0][cut:],), (train.y[0][cut:],))
+            splits["train"], splits["valid"] = _blocks(train.u[0], train.y[0], fraction, blocks)
         return self.replace(splits=splits)
 
     def with_units(self, units: Mapping[str, str] | Sequence[str] | None) -> "Dataset":

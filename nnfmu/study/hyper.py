@@ -20,7 +20,8 @@ from nnfmu.training import TrainConfig
 #: a search's ensemble, the data plan.
 RUN_MODEL_FIELDS = ("arch", "n_u", "n_y", "members", "member_configs", "linear_order")
 #: TrainConfig fields a run sets: its strategy, length, seed, dtype and validation split.
-RUN_TRAIN_FIELDS = ("strategy", "epochs", "patience", "seed", "max_minutes", "dtype", "valid_fraction")
+RUN_TRAIN_FIELDS = ("strategy", "epochs", "patience", "seed", "max_minutes", "dtype", "valid_fraction",
+                    "valid_blocks")
 
 
 def _fields(cls: type, run: tuple[str, ...]) -> list[tuple[str, object, dataclasses.Field]]:

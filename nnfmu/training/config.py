@@ -51,6 +51,9 @@ class TrainConfig:
         Wall-clock budget of one call; the epoch running when it ends is validated and kept.
     valid_fraction : float
         Share of the training split carved out for validation when the dataset has no 'valid' split.
+    valid_blocks : int
+        One training record without a 'valid' split: the validation is ``valid_blocks`` blocks spread over the
+        record (blocked cross-validation's hold-out), each ``valid_fraction / valid_blocks`` long; 1: its tail.
     dtype : {'float32', 'float64'}
         Precision of training (evaluation of the test split is always float64).
     feedback_noise : float
@@ -93,6 +96,7 @@ class TrainConfig:
     seed: int = 0
     max_minutes: float | None = None
     valid_fraction: float = 0.1
+    valid_blocks: int = 1
     dtype: str = "float32"
     feedback_noise: float = 0.0
     average: str = "none"
@@ -116,7 +120,7 @@ class TrainConfig:
             raise ConfigError(f"feedback_noise must be a finite number >= 0 (a fraction of the output std), "
                               f"got {self.feedback_noise!r}")
         object.__setattr__(self, "join", bool(self.join))
-        for name, low in (("epochs", 1), ("batch_size", 1), ("patience", 0)):
+        for name, low in (("epochs", 1), ("batch_size", 1), ("patience", 0), ("valid_blocks", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")

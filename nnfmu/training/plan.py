@@ -77,10 +77,14 @@ def valid_fraction(ds: Dataset, init_window: int = 1) -> float | None:
     return float(min(max(tail / n, 0.05), 0.5))
 
 
-def validation_line(ds: Dataset, frac: float) -> str:
-    """What the plan says of the validation tail it carves from the one training record."""
-    return (f"validation: the last {frac:.0%} of the record ({int(frac * ds.train.lengths[0])} samples, long enough "
-            "to rank models over a test-like horizon)")
+def validation_line(ds: Dataset, frac: float, blocks: int = 1) -> str:
+    """What the plan says of the validation it carves from the one training record (its tail, or ``blocks``)."""
+    samples = int(frac * ds.train.lengths[0])
+    if blocks > 1:
+        return (f"validation: {frac:.0%} of the record ({samples} samples) in {blocks} blocks spread over it "
+                "(--valid-blocks 1: its tail)")
+    return f"validation: the last {frac:.0%} of the record ({samples} samples, long enough to rank models over a " \
+           "test-like horizon)"
 
 
 def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1) -> Plan:

@@ -115,9 +115,10 @@ def prepare_dataset(dataset: Dataset, cfg: TrainConfig) -> tuple[Dataset, list]:
                           "load one with nnfmu.load_dataset(folder)")
     if dataset.valid is not None:
         return dataset, []
-    carved = dataset.with_validation(cfg.valid_fraction, seed=cfg.seed)
-    how = (f"{carved.valid.n_traj} of {dataset.train.n_traj} training trajectories"
-           if dataset.train.n_traj >= 2 else f"the last {cfg.valid_fraction:.0%} of the training record")
+    carved = dataset.with_validation(cfg.valid_fraction, seed=cfg.seed, blocks=cfg.valid_blocks)
+    how = (f"{carved.valid.n_traj} of {dataset.train.n_traj} training trajectories" if dataset.train.n_traj >= 2
+           else f"the last {cfg.valid_fraction:.0%} of the training record" if cfg.valid_blocks == 1
+           else f"{cfg.valid_blocks} blocks spread over the training record, {cfg.valid_fraction:.0%} of it")
     return carved, [f"the dataset has no 'valid' split; validating on {how} (valid_fraction={cfg.valid_fraction})"]
 
 
