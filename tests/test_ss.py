@@ -11,23 +11,12 @@ import torch
 from nnfmu.cli import main
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.export import build_fmu, casadi_model
-from nnfmu.linear import identify_linear
 from nnfmu.models import ModelConfig, architectures, build_model, load_model
 from nnfmu.training import TrainConfig, dataset_meta, train
 from nnfmu.training.linear_start import start_linear_path
-from tests.test_linear import dataset, true_system
+from tests.test_linear_path import data, linear, rel  # noqa: F401 (the fixtures: the same system as the path's)
 
 pytestmark = pytest.mark.usefixtures("one_thread")
-
-
-@pytest.fixture(scope="module")
-def data():
-    return dataset(true_system(), noise=0.01)
-
-
-@pytest.fixture(scope="module")
-def linear(data):
-    return identify_linear(data)
 
 
 def ss_model(data, linear, **options):
@@ -36,10 +25,6 @@ def ss_model(data, linear, **options):
     model = build_model(config, dataset_meta(data, "ss"), norm=data.norm_stats("train")).double()
     start_linear_path(model, data, linear)
     return model
-
-
-def rel(a, b) -> float:
-    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(b)))
 
 
 def fmu_run(path, data, u, y0, **past):

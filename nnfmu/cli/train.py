@@ -68,7 +68,7 @@ _TRAIN_OPTIONS = (
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
     ("--lr-schedule", "lr_schedule", str, "learning-rate schedule: constant or cosine over --epochs (default: constant)"),
     ("--valid-fraction", "valid_fraction", float, "one training record without a valid split: the share held out "
-     "for validation (default: min(test length, 25 %) of the record, at least 10 %, chosen from the data; 0.1 for "
+     "for validation (default: min(test length, 25 %%) of the record, at least 10 %%, chosen from the data; 0.1 for "
      "several trajectories: that share of them, at random)"),
     ("--valid-blocks", "valid_blocks", int, "one training record: hold out --valid-fraction as K blocks spread over "
      "the record instead of its tail (default 1: the tail)"),
