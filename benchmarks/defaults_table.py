@@ -9,7 +9,9 @@ For each dataset folder and architecture this runs exactly what a new user types
 
 and prints one table: the test NRMSE (free run in fmpy) of the linear model and of each network, its
 ratio to the linear model, and the CPU seconds (user + system, of the command and its children) of each
-cell (each training's output is kept in ``WORK/DATASET/ARCH.log``). ``--max-minutes N`` adds that flag to
+cell (each training's output is kept in ``WORK/DATASET/ARCH.log``). After each dataset's rows, a line gives
+the rank correlation (Spearman's rho, Kendall's tau) between the validation and the test NRMSE over every
+seed of every cell (issue 38: how well the validation that makes every choice predicts the test). ``--max-minutes N`` adds that flag to
 every training (the time-budget search over the knobs left out); the architecture ``search`` names the cell
 that gives no ``--arch``, so that the search also chooses it. Pin it to one core on a shared machine
 (``taskset -c 1``) and name the CPU next to the figures. Not part of the tests.
@@ -74,6 +76,31 @@ def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reus
     return out
 
 
+def seed_scores(work: Path, archs: list[str]) -> list[tuple[float, float]]:
+    """``(validation NRMSE, test NRMSE)`` of every seed of every cell (one pair for a cell of one training), as
+    the checkpoints' summaries hold them (float64 free runs from y0)."""
+    from nnfmu.models import load_checkpoint
+
+    pairs = []
+    for arch in archs:
+        summary = load_checkpoint(work / f"{arch}.pt")["summary"]
+        for row in summary.get("seeds") or [summary]:
+            if row.get("best_valid_nrmse") is not None and row.get("test_nrmse") is not None:
+                pairs.append((float(row["best_valid_nrmse"]), float(row["test_nrmse"])))
+    return pairs
+
+
+def rank_line(name: str, pairs: list[tuple[float, float]]) -> str:
+    """The line after a dataset's rows: Spearman's rho and Kendall's tau of validation against test."""
+    from scipy.stats import kendalltau, spearmanr
+
+    if len(pairs) < 3:
+        return f"{name}: {len(pairs)} seeds, too few for a rank correlation"
+    valid, test = zip(*pairs)
+    return (f"{name}: validation-test rank correlation over {len(pairs)} seeds: Spearman "
+            f"{spearmanr(valid, test).statistic:.3f}, Kendall {kendalltau(valid, test).statistic:.3f}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("datasets", nargs="+", type=Path)
@@ -92,6 +119,7 @@ def main(argv=None) -> int:
         base = rows["linear"][0]
         for name, (score, seconds) in rows.items():
             print(f"| {data.name} | {name} | {score:.4f} | {score / base:.3f} | {seconds:.0f} |", flush=True)
+        print(rank_line(data.name, seed_scores(args.work / data.name, args.archs)), flush=True)
     return 0
 
 
