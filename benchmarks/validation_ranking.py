@@ -3,7 +3,8 @@
 Every choice nnfmu makes (the epoch kept, the seed kept, the search's trial) ranks models by their validation
 free-run NRMSE. A validation scheme is as good as that ranking agrees with the test's. For each dataset and
 scheme this trains ``--trials`` networks that differ in seed, width and learning rate (``nnfmu train`` at its
-defaults otherwise, one seed each, ``--max-minutes`` of wall time each, ``--jobs`` at once), reads each one's
+defaults otherwise, one seed each, ``--epochs`` each (a step budget, so that a busy machine changes the
+wall time, not the result; ``--max-minutes`` caps each as well), ``--jobs`` at once), reads each one's
 best validation NRMSE and its test NRMSE from its checkpoint, and prints Spearman's rho and Kendall's tau
 between the two, and what picking the trial best on validation would have given on test against the best test.
 
@@ -13,7 +14,7 @@ training record without a valid split (the F-16); ``--one-record`` joins a datas
 its valid split, dropped as a split) end to end first, for data cut from one recording (the robot's pieces).
 Not part of the tests. Name the CPU beside the figures.
 
-    python benchmarks/validation_ranking.py data/f16 --schemes tail blocks4 --trials 8 --max-minutes 1.5
+    python benchmarks/validation_ranking.py data/f16 --schemes tail blocks4 --trials 8 --epochs 40
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ def one_record(data: Path, work: Path) -> Path:
     return out
 
 
-def trial(data: Path, arch: str, scheme: str, i: int, minutes: float, work: Path) -> tuple[float, float]:
+def trial(data: Path, arch: str, scheme: str, i: int, epochs: int, minutes: float, work: Path) -> tuple[float, float]:
     """Train trial ``i`` of ``scheme``; ``(best validation NRMSE, test NRMSE)`` from its checkpoint."""
     from nnfmu.models import load_checkpoint
 
@@ -57,7 +58,7 @@ def trial(data: Path, arch: str, scheme: str, i: int, minutes: float, work: Path
     out = work / f"{scheme}-{i}.pt"
     out.unlink(missing_ok=True)
     cmd = [sys.executable, "-m", "nnfmu", "train", "--data", str(data), "--arch", arch, "--seeds", "1",
-           "--seed", str(i), "--hidden", str(width), "--lr", str(rate), "--epochs", "1000000",
+           "--seed", str(i), "--hidden", str(width), "--lr", str(rate), "--epochs", str(epochs),
            "--max-minutes", str(minutes), "--valid-blocks", str(blocks), "--threads", "1", "--quiet", "-o", str(out)]
     done = subprocess.run(cmd, capture_output=True, text=True)
     (work / f"{scheme}-{i}.log").write_text(done.stdout + done.stderr)
@@ -73,7 +74,8 @@ def main() -> None:
     p.add_argument("--schemes", nargs="+", default=["tail", "blocks4"])
     p.add_argument("--arch", default="gru")
     p.add_argument("--trials", type=int, default=8)
-    p.add_argument("--max-minutes", type=float, default=1.5)
+    p.add_argument("--epochs", type=int, default=40)
+    p.add_argument("--max-minutes", type=float, default=10.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--one-record", action="store_true", help="join each dataset's records into one first")
     p.add_argument("--work", type=Path, default=Path("validation-ranking"))
@@ -86,7 +88,7 @@ def main() -> None:
         source = one_record(data, work) if args.one_record else data
         for scheme in args.schemes:
             with ThreadPoolExecutor(args.jobs) as pool:
-                rows = list(pool.map(lambda i: trial(source, args.arch, scheme, i, args.max_minutes, work),
+                rows = list(pool.map(lambda i: trial(source, args.arch, scheme, i, args.epochs, args.max_minutes, work),
                                      range(args.trials)))
             valid, test = np.array(rows).T
             rho, tau = spearmanr(valid, test).statistic, kendalltau(valid, test).statistic
