@@ -146,10 +146,24 @@ class SSStepModel(StepModel):
                 z = self._state_next(z, un[:, k])
                 ys.append(output(self._output(z)))
             return torch.stack(ys, dim=1)
-        zs = []
-        for k in range(un.shape[1] - 1):
-            z = self._state_next(z, un[:, k])
-            zs.append(z)
-        if not zs:
+        if un.shape[1] < 2:
             return yn0[:, None]
-        return torch.cat([yn0[:, None], self._output(torch.stack(zs, dim=1))], dim=1)
+        return torch.cat([yn0[:, None], self._output(self._states(z, un[:, :-1]))], dim=1)
+
+    def _states(self, z: torch.Tensor, un: torch.Tensor) -> torch.Tensor:
+        """``z_1 .. z_T`` (B, T, n_x) from ``z_0`` (B, n_x) and ``u_0 .. u_{T-1}`` (B, T, n_u).
+
+        The same sums as :meth:`_state_next`, arranged for the loop: the input's share of ``A z + B u + b`` and
+        of ``f``'s first layer for all steps at once, and ``z``'s shares of both in one product per step.
+        """
+        first, s = self.f[0], self.config.n_states
+        drive = un @ self.lin_B.T + self.lin_b  # (B, T, n_x)
+        pre = un @ first.weight[:, s:].T + first.bias  # (B, T, hidden)
+        joint = torch.cat([self.lin_A.T, first.weight[:, :s].T], dim=1)  # z -> [A z | W_z z]
+        rest = self.f[1:]
+        zs = []
+        for drive_k, pre_k in zip(drive.unbind(1), pre.unbind(1)):  # unbind: one backward for all the steps' slices
+            zz = z @ joint
+            z = zz[:, :s] + drive_k + _run(rest, zz[:, s:] + pre_k)
+            zs.append(z)
+        return torch.stack(zs, dim=1)
