@@ -14,8 +14,9 @@ def casadi_step(model, x, un):
     n_y = model.config.n_y
     z = x[n_y:]
     A, B, b, C, d = (nets.dm(getattr(model, k)) for k in ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d"))
-    z_next = ca.mtimes(A, z) + ca.mtimes(B, un) + b + nets.module_expr(model.f, ca.vertcat(z, un), "f")
-    yn = ca.mtimes(C, z_next) + d + nets.module_expr(model.h, z_next, "h")
+    f = nets.module_expr(model.f, ca.vertcat(z, un), "f")
+    z_next = ca.mtimes(A, z) + ca.mtimes(B, un) + b + model.scale * f
+    yn = ca.mtimes(C, z_next) + d + model.scale * nets.module_expr(model.h, z_next, "h")
     return ca.vertcat(yn, z_next), yn
 
 

@@ -12,8 +12,12 @@ states beyond the linear order (``states > linear_order``) have none. ``f`` and 
 ``layers`` hidden layers of ``hidden`` units; ``E`` is the learned encoder of :mod:`nnfmu.models.encoder`
 on the flattened window. On a linear path the last layers of ``f``, ``h`` and ``E`` start at zero, so the
 untrained network *is* the linear model (its free run to rounding, in torch, CasADi and the FMU) and
-training learns a correction. Without a path (``linear_order = 0``) the linear part is zero and ``f``, ``h``
-start as ordinary random MLPs (SUBNET's own form).
+training learns a correction; ``f`` and ``h`` are then read through ``1 / hidden`` (:attr:`SSStepModel.scale`),
+so that one optimiser step (Adam moves every weight by about the learning rate) moves the state by about the
+learning rate, as the other networks' path gains do, and not ``hidden`` times that: unscaled, the first steps
+threw the slider's integrating state off (a training loss of 236 in the first epoch, never recovered).
+Without a path (``linear_order = 0``) the linear part is zero and ``f``, ``h`` start as ordinary random MLPs
+read at scale 1 (SUBNET's own form).
 
 The flat state is ``x = [y_k (n_y) | z_k (n_x)]``: the newest output is kept beside ``z`` so that
 ensembles and teacher forcing find it where every network keeps it, but the step does not read it.
@@ -70,6 +74,8 @@ class SSStepModel(StepModel):
         if not isinstance(config, SSConfig):
             raise ShapeError(f"SSStepModel needs an SSConfig, got {type(config).__name__}")
         s, n_u, n_y, on_path = config.n_states, config.n_u, config.n_y, config.linear_order > 0
+        #: The factor ``f`` and ``h`` are read through: ``1 / hidden`` on a linear path (module docstring), else 1.
+        self.scale = 1.0 / config.hidden if on_path else 1.0
         self.f = _mlp(s + n_u, s, config, zero_last=on_path)
         self.h = _mlp(s, n_y, config, zero_last=on_path)
         self.encoder = make_encoder(config, s)
@@ -119,10 +125,10 @@ class SSStepModel(StepModel):
         return torch.cat([yn0, z0], dim=1)
 
     def _state_next(self, z: torch.Tensor, un: torch.Tensor) -> torch.Tensor:
-        return z @ self.lin_A.T + un @ self.lin_B.T + self.lin_b + _run(self.f, torch.cat([z, un], dim=1))
+        return z @ self.lin_A.T + un @ self.lin_B.T + self.lin_b + self.scale * _run(self.f, torch.cat([z, un], dim=1))
 
     def _output(self, z: torch.Tensor) -> torch.Tensor:
-        return z @ self.lin_C.T + self.lin_d + _run(self.h, z)
+        return z @ self.lin_C.T + self.lin_d + self.scale * _run(self.h, z)
 
     def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         z_next = self._state_next(x[:, self.config.n_y:], un)
@@ -164,6 +170,6 @@ class SSStepModel(StepModel):
         zs = []
         for drive_k, pre_k in zip(drive.unbind(1), pre.unbind(1)):  # unbind: one backward for all the steps' slices
             zz = z @ joint
-            z = zz[:, :s] + drive_k + _run(rest, zz[:, s:] + pre_k)
+            z = zz[:, :s] + drive_k + self.scale * _run(rest, zz[:, s:] + pre_k)
             zs.append(z)
         return torch.stack(zs, dim=1)
