@@ -37,11 +37,13 @@ from nnfmu.errors import DataError, DataFileError, ShapeError
 def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write ``ds`` as a dataset folder at ``path`` and return the path.
 
-    An existing folder is replaced only with ``overwrite=True``; the old one
-    stays intact until the new one is complete. A dataset without a ``test``
-    split is refused (:class:`DataError`): every model is scored on it.
+    An existing folder is replaced only with ``overwrite=True``, and only if it
+    is a dataset folder (:func:`check_replaceable`); the old one stays intact
+    until the new one is complete. A symbolic link is written through to its
+    folder. A dataset without a ``test`` split is refused (:class:`DataError`):
+    every model is scored on it.
     """
-    path = Path(path)
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
     if "test" not in ds.splits:
         raise DataError(f"the dataset has no 'test' split (it has {', '.join(ds.splits)}), so nothing could be "
                         f"scored on {path}; add held-out test data: from_arrays(u_test=..., y_test=...), "
@@ -51,6 +53,7 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
         raise DataFileError(
             f"{path} already exists; choose another folder or pass overwrite=True (CLI: --force)"
         )
+    check_replaceable(path)
     parent = path.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -69,6 +72,39 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
             raise _write_error(exc, path) from exc
         raise
     return path
+
+
+#: What a dataset folder holds; replacing a folder that holds anything else would lose it.
+DATASET_FILES = frozenset({"meta.json", *(f"{name}.npz" for name in SPLIT_NAMES)})
+
+
+def check_replaceable(path: str | os.PathLike) -> None:
+    """Raise :class:`DataFileError` unless ``path`` is absent, an empty folder or a dataset folder.
+
+    A dataset folder holds ``meta.json`` and nothing but the files of :data:`DATASET_FILES`. Anything else
+    (a file, a folder of the user's own work) is named in the message and never replaced, even with
+    ``--force``.
+    """
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
+    if not path.exists():
+        return
+    if not path.is_dir():
+        raise DataFileError(f"{path} is a file, not a dataset folder; nnfmu replaces only a dataset folder it "
+                            "wrote: choose another folder")
+    try:
+        entries = sorted(path.iterdir())
+    except OSError as exc:
+        raise _write_error(exc, path) from exc
+    foreign = [e.name for e in entries if e.name not in DATASET_FILES or not e.is_file() or e.is_symlink()]
+    if foreign:
+        more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        what = f"it holds {', '.join(map(repr, foreign[:3]))}{more}, which nnfmu did not write"
+    elif entries and not (path / "meta.json").is_file():
+        what = "it has no meta.json"
+    else:
+        return
+    raise DataFileError(f"{path} is not a dataset folder: {what}; --force replaces only a dataset folder: move "
+                        "those files away or choose another folder")
 
 
 def _write_error(exc: OSError, path: Path) -> DataFileError:
