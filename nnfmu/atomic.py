@@ -19,6 +19,7 @@ import errno
 import os
 import re
 import secrets
+import stat
 import sys
 import time
 from pathlib import Path
@@ -48,6 +49,28 @@ def describe_os_error(exc: OSError, path: str | os.PathLike | None = None) -> st
     cause = exc.strerror or str(exc)
     hint = _OS_ERROR_HINTS.get(errno.errorcode.get(exc.errno, ""))
     return f"{where + ': ' if where else ''}{cause}" + (f"; {hint}" if hint else "")
+
+
+_SPECIAL = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", stat.S_IFIFO: "a FIFO (named pipe)",
+            stat.S_IFSOCK: "a socket"}
+
+
+def resolve_target(path: str | os.PathLike) -> Path:
+    """Where a write of ``path`` lands: the file a symbolic link points to, or ``path`` itself.
+
+    Raises :class:`DataFileError` if that is a device node, a FIFO or a socket: renaming a file over one would
+    destroy it (``/dev/full`` becoming a regular file, for root), and writing into one is not a file's write.
+    """
+    path = Path(path)
+    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    try:
+        kind = _SPECIAL.get(stat.S_IFMT(target.stat().st_mode))
+    except OSError:
+        return target  # absent (or unreadable): the write itself says why
+    if kind:
+        via = f" (the link {path} points to it)" if target != path else ""
+        raise DataFileError(f"cannot write {target}{via}: it is {kind}, not a regular file; give the path of a file")
+    return target
 
 
 def _temp_pattern(path: Path, suffix: str) -> re.Pattern:
@@ -130,9 +153,10 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None], suffix:
     choose the format by extension. Missing parent folders are created. On any error,
     including Ctrl-C and SIGTERM, the temporary file and the folders created are removed
     and the exception propagates; an ``OSError`` propagates as :class:`DataFileError`
-    naming ``path``.
+    naming ``path``. A symbolic link is written through (its target gets the content, the
+    link stays); a device node, FIFO or socket is refused (:func:`resolve_target`).
     """
-    path = Path(path)
+    path = resolve_target(path)
     created: list[Path] = []
     tmp = None
     try:
