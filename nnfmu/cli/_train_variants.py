@@ -36,8 +36,7 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
                              progress=not args.quiet, device=device, threads=args.threads, linear=linear,
                              overwrite=args.force)
     except (KeyboardInterrupt, Terminated):
-        print(f"interrupted: the seeds' checkpoints are kept in {seeds_folder(out)}; run the same command again "
-              "to continue them")
+        print(_interrupted_seeds(seeds_folder(out)))
         raise
     for note in result.notes:
         print(f"note: {note}")
@@ -52,6 +51,19 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
         print_test(ds, result.test, result.test_window, model_config.init_window)
         print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
     return 0
+
+
+def _interrupted_seeds(folder) -> str:
+    """What an interrupted ``--seeds`` run kept: the seeds' checkpoints, or nothing (then its empty folder goes)."""
+    kept = sorted(p.name for p in folder.glob("seed-*.pt")) if folder.is_dir() else []
+    if kept:
+        return (f"interrupted: the checkpoints of {', '.join(kept)} are kept in {folder}; run the same command "
+                "again to continue them")
+    try:
+        folder.rmdir()  # made for the seeds, and still empty
+    except OSError:
+        pass
+    return "interrupted before any seed wrote a checkpoint: nothing was kept"
 
 
 def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out, device, run_one) -> int:
