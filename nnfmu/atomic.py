@@ -34,8 +34,6 @@ _OS_ERROR_HINTS = {  # by errno name (not every platform has every name)
     "ENOSPC": "free some disk space or choose another location",
     "EDQUOT": "free some of your disk quota or choose another location",
     "EFBIG": "the file system or a limit refuses a file this large; choose another location",
-    "EACCES": "choose a location you may write to",
-    "EPERM": "choose a location you may write to",
     "EROFS": "the file system is read-only; choose another location",
     "ENOTDIR": "a part of the path is a file, not a folder; choose another path",
     "EISDIR": "it is a folder; give the path of a file",
@@ -43,11 +41,23 @@ _OS_ERROR_HINTS = {  # by errno name (not every platform has every name)
 }
 
 
-def describe_os_error(exc: OSError, path: str | os.PathLike | None = None) -> str:
-    """One line for ``exc``: the path (``path`` if given, else the error's own), the cause and what to do."""
+_PERMISSION_HINTS = {  # by what failed: a refused read is never fixed by writing elsewhere
+    "write": "choose a location you may write to",
+    "read": "check that you may read it and its folders",
+    "either": "check the permissions of it and its folders",
+}
+
+
+def describe_os_error(exc: OSError, path: str | os.PathLike | None = None, *, doing: str = "either") -> str:
+    """One line for ``exc``: the path (``path`` if given, else the error's own), the cause and what to do.
+
+    ``doing``: ``"write"``, ``"read"`` or ``"either"`` (not known: a refused permission gets the fix that fits
+    both), for the fix of a refused permission.
+    """
     where = str(path) if path is not None else " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f)
     cause = exc.strerror or str(exc)
-    hint = _OS_ERROR_HINTS.get(errno.errorcode.get(exc.errno, ""))
+    name = errno.errorcode.get(exc.errno, "")
+    hint = _PERMISSION_HINTS[doing] if name in ("EACCES", "EPERM") else _OS_ERROR_HINTS.get(name)
     return f"{where + ': ' if where else ''}{cause}" + (f"; {hint}" if hint else "")
 
 
@@ -170,7 +180,7 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None], suffix:
             tmp.unlink(missing_ok=True)
         _remove_empty(created)
         if isinstance(exc, OSError) and not isinstance(exc, DataFileError):
-            raise DataFileError(f"cannot write {describe_os_error(exc, path)}") from exc
+            raise DataFileError(f"cannot write {describe_os_error(exc, path, doing='write')}") from exc
         raise
     return path
 

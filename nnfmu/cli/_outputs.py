@@ -58,7 +58,7 @@ def check_writable(*targets: str | os.PathLike | None) -> None:
             os.close(fd)
             os.unlink(probe)
         except OSError as exc:
-            raise DataFileError(f"cannot write {describe_os_error(exc, target)}") from exc
+            raise DataFileError(f"cannot write {describe_os_error(exc, target, doing='write')}") from exc
 
 
 @contextlib.contextmanager

@@ -112,7 +112,7 @@ def _write_error(exc: OSError, path: Path) -> DataFileError:
     if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)):
         return DataFileError(f"no space left on device at {path}; free space or choose another folder "
                              "(CLI: another -o)")
-    return DataFileError(f"cannot write the dataset folder {describe_os_error(exc, path)}")
+    return DataFileError(f"cannot write the dataset folder {describe_os_error(exc, path, doing='write')}")
 
 
 def remove_stale_temp_dirs(path: Path) -> list[Path]:
