@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from nnfmu.errors import ConfigError, ShapeError
-from nnfmu.physics.base import PhysicsSystem, parameter_variables
+from nnfmu.physics.base import PhysicsSystem, check_model_header, parameter_variables
 from nnfmu.system import Variable
 
 __all__ = ["ModelBuilder", "check_system"]
@@ -62,8 +62,7 @@ class ModelBuilder:
                  settle_time: float | None = None, source: dict | None = None) -> None:
         if not (isinstance(Ts, (int, float)) and np.isfinite(Ts) and Ts > 0):
             raise ConfigError(f"{name}: Ts must be a positive number of seconds, got {Ts!r}")
-        if isinstance(n_sub, bool) or not isinstance(n_sub, int) or n_sub < 1:
-            raise ConfigError(f"{name}: n_sub must be a whole number >= 1, got {n_sub!r}")
+        check_model_header(name, n_sub)  # before a CasADi function is named after it, or RK4 unrolled n_sub times
         if settle_time is not None and not (np.isfinite(settle_time) and settle_time > 0):
             raise ConfigError(f"{name}: settle_time must be a positive number of seconds, got {settle_time!r}")
         self.name, self.Ts, self.n_sub, self.description = name, float(Ts), n_sub, description
@@ -159,7 +158,7 @@ class ModelBuilder:
         if xdot is not None and by_state:
             raise ShapeError(f"{self.name}: give the ODE as one column or by state name, not both")
         if xdot is not None:
-            xdot = ca.SX(xdot)
+            xdot = self._as_sx(xdot, "the ODE", f"a column of {len(names)} derivatives, one per state")
             if xdot.shape != (len(names), 1):
                 raise ShapeError(f"{self.name}: the ODE gives {xdot.shape[0]}x{xdot.shape[1]} derivatives for "
                                  f"{len(names)} states ({', '.join(names)}); give one per state, in that order")
@@ -171,10 +170,21 @@ class ModelBuilder:
         if missing:
             raise ShapeError(f"{self.name}: the ODE has no derivative for {', '.join(missing)}; give one for every "
                              f"state ({', '.join(names)})")
+        by_state = {n: self._as_sx(e, f"the ODE's derivative of {n}", "one scalar expression per state")
+                    for n, e in by_state.items()}
         for n, e in by_state.items():
-            if ca.SX(e).shape != (1, 1):
-                raise ShapeError(f"{self.name}: the derivative of {n} is not a scalar")
-        self._xdot = {n: ca.SX(by_state[n]) for n in names}
+            if e.shape != (1, 1):
+                raise ShapeError(f"{self.name}: the ODE's derivative of {n} is {e.shape[0]}x{e.shape[1]}, expected "
+                                 f"1x1; give one scalar expression per state ({', '.join(names)})")
+        self._xdot = {n: by_state[n] for n in names}
+
+    def _as_sx(self, value, what: str, expected: str) -> ca.SX:
+        """``value`` as CasADi SX (a list or tuple stacked as a column); one line naming ``what`` if it is none."""
+        try:
+            return ca.vertcat(*value) if isinstance(value, (list, tuple)) else ca.SX(value)
+        except (NotImplementedError, TypeError, RuntimeError):  # CasADi lists every constructor's prototype
+            raise ShapeError(f"{self.name}: {what} is a {type(value).__name__}, not a CasADi expression or number; "
+                             f"give {expected}") from None
 
     def init(self, **by_state) -> None:
         """The initial-state rule: ``state=expr`` of the measured outputs, the first inputs and the parameters."""
