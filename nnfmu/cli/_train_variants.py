@@ -44,13 +44,21 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
         test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
         print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
     spread = result.spread()
-    what = {"ensemble": "the ensemble", "best": "the best", "select": "the selection"}[keep]
-    print(f"kept {what} of {seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
-          f"checkpoint {out}")
+    print(f"kept {_kept(result, seeds)}: validation free-run NRMSE {result.valid_nrmse:.4f}; checkpoint {out}")
     if result.test is not None:
         print_test(ds, result.test, result.test_window, model_config.init_window)
         print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
     return 0
+
+
+def _kept(result, seeds: int) -> str:
+    """What the checkpoint holds: an ensemble of how many seeds, or which seed alone (``--keep ensemble`` keeps
+    one seed when fewer than two trained)."""
+    members = int(getattr(result.model.config, "members", 1) or 1)
+    if members > 1:
+        return f"the ensemble of {members} seeds" + (f" (of {seeds})" if members < seeds else "")
+    alone = [r["seed"] for r in result.seeds if r["best_valid_nrmse"] == result.valid_nrmse]
+    return f"seed {alone[0]} alone (of {seeds} seeds)" if alone else f"one seed alone (of {seeds})"
 
 
 def _interrupted_seeds(folder) -> str:

@@ -100,6 +100,18 @@ def _held_out(dataset, fraction: float | None):
     return dataset.with_validation(fraction)
 
 
+def _check_varies(dataset) -> None:
+    """Refuse training data whose inputs and outputs are all constant: they show no dynamics to identify."""
+    import numpy as np
+
+    from nnfmu.errors import DataError
+
+    train = dataset.train
+    if all(np.ptp(np.concatenate(arrays), axis=0).max() == 0 for arrays in (train.u, train.y)):
+        raise DataError("the training data show no dynamics (every input and output is constant); a linear model "
+                        "needs data that vary: check the dataset's signals")
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
@@ -122,6 +134,7 @@ def _run(args: argparse.Namespace) -> int:
         check_fmu_options(args)
     dataset = _held_out(load_dataset(args.data), args.holdout)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
+    _check_varies(dataset)  # before the plan and the progress bars: their lines would precede the error
     print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet)
     print("\n".join(_summary(model, dataset)))

@@ -36,6 +36,10 @@ def _names(what: str, given, known: list[str]) -> list[str]:
     return list(given)
 
 
+#: The largest finite bound a fit accepts: the solver squares scaled steps and bounds, and 1e308 overflows.
+MAX_BOUND = 1e150
+
+
 def choose_unknowns(system: PhysicsSystem, *, free=None, fixed=(), bounds=None, start=None) -> Unknowns:
     """The free parameters of ``system`` and their bounds and starts.
 
@@ -64,6 +68,10 @@ def choose_unknowns(system: PhysicsSystem, *, free=None, fixed=(), bounds=None, 
             raise ConfigError(f"the start of parameter {v.name} is {s}; give a finite value (--start {v.name}=...)")
         if lo > hi:
             raise ConfigError(f"the bounds of {v.name} are [{lo:g}, {hi:g}], lower above upper; swap them")
+        if max((abs(b) for b in (lo, hi) if np.isfinite(b)), default=0.0) > MAX_BOUND:
+            raise ConfigError(f"the bounds of {v.name} [{lo:g}, {hi:g}] {v.unit} are beyond {MAX_BOUND:g}, where the "
+                              f"solver's squares overflow; give bounds within +-{MAX_BOUND:g}, or leave a side empty "
+                              f"for no bound (--bounds {v.name}=LO:)")
         if not lo <= s <= hi:
             raise ConfigError(f"the bounds of {v.name} [{lo:g}, {hi:g}] {v.unit} exclude its start {s:g}; widen "
                               f"--bounds {v.name}=LO:HI or give a start inside (--start {v.name}=VALUE)")
