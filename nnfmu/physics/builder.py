@@ -93,11 +93,18 @@ class ModelBuilder:
         return sym
 
     def input(self, name: str, unit: str = "", description: str = "", *, min: float | None = None,
-              max: float | None = None, start: float = 0.0) -> ca.SX:
-        """An input with its valid range ``[min, max]`` (the FMU declares it; ``generate`` excites within it)."""
+              max: float | None = None, start: float | None = None) -> ca.SX:
+        """An input with its valid range ``[min, max]`` (the FMU declares it; ``generate`` excites within it).
+
+        ``start``: the FMU's value before an importer sets one; default 0, or the range's middle (its one bound)
+        where the range excludes 0. A start outside the range is refused.
+        """
         self._new("input", name)
         sym = ca.SX.sym(name)
-        self._inputs.append((Variable(name, unit, description, float(start), min, max), sym))
+        variable = Variable(name, unit, description, _default_start(min, max) if start is None else float(start),
+                            min, max)
+        _check_bounds(self.name, variable, "input", "start value", "start= to a value inside them")
+        self._inputs.append((variable, sym))
         return sym
 
     def parameter(self, name: str, nominal: float, unit: str = "", description: str = "", *,
@@ -242,11 +249,21 @@ class ModelBuilder:
         return values
 
 
-def _check_bounds(model: str, v: Variable) -> None:
+def _default_start(low: float | None, high: float | None) -> float:
+    """0 where the range holds it, else the range's middle, or its one bound."""
+    if (low is None or low <= 0) and (high is None or high >= 0):
+        return 0.0
+    if low is not None and high is not None:
+        return 0.5 * (low + high)
+    return float(low if low is not None else high)
+
+
+def _check_bounds(model: str, v: Variable, kind: str = "parameter", value: str = "nominal value",
+                  fix: str = "the nominal value") -> None:
     low, high = -np.inf if v.min is None else v.min, np.inf if v.max is None else v.max
     if not (np.isfinite(v.start) and low <= v.start <= high):
-        raise ConfigError(f"{model}: parameter {v.name!r} has nominal value {v.start:g} outside its bounds "
-                          f"[{low:g}, {high:g}]; widen the bounds or change the nominal value")
+        raise ConfigError(f"{model}: {kind} {v.name!r} has {value} {v.start:g} outside its bounds "
+                          f"[{low:g}, {high:g}]; widen the bounds or change {fix}")
 
 
 def _plausible(v: Variable) -> float:
@@ -262,6 +279,8 @@ def check_system(system: PhysicsSystem) -> None:
     """
     for v in system.parameters:
         _check_bounds(system.name, v)
+    for v in system.inputs:  # a JSON document's inputs too: the FMU refuses a start outside the range
+        _check_bounds(system.name, v, "input", "start value", "its start to a value inside them")
     u = np.array([_plausible(v) for v in system.inputs], dtype=float)
     y0 = np.array([_plausible(v) for v in system.outputs], dtype=float)
     p = system.parameter_values()
