@@ -21,8 +21,8 @@ from __future__ import annotations
 import errno
 import json
 import os
+import secrets
 import shutil
-import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -58,7 +58,7 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
     try:
         parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temp_dirs(path)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
+        tmp = _make_temp_dir(parent / f".{path.name}.{os.getpid()}")
     except OSError as exc:
         raise _write_error(exc, path) from exc
     try:
@@ -105,6 +105,19 @@ def check_replaceable(path: str | os.PathLike) -> None:
         return
     raise DataFileError(f"{path} is not a dataset folder: {what}; --force replaces only a dataset folder: move "
                         "those files away or choose another folder")
+
+
+def _make_temp_dir(stem: Path) -> Path:
+    """A new folder ``<stem>.<random>.tmp``, with the usual permissions (``0777`` less the umask), as any folder the
+    user makes: :func:`tempfile.mkdtemp` makes it ``0700``, and the dataset folder would keep that."""
+    for _ in range(100):
+        tmp = stem.with_name(f"{stem.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            tmp.mkdir()
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary folder name", str(stem))
 
 
 def _write_error(exc: OSError, path: Path) -> DataFileError:
