@@ -184,6 +184,8 @@ def _run(args: argparse.Namespace) -> int:
     print(ds.summary())
     if ds.valid is None:
         print("no validation split: 'nnfmu train' carves one out of train (--valid-fraction here fixes it once)")
+    for note in ds.source.get("notes", []):
+        print(f"note: {note}")
     if "caveat" in ds.source:
         print(f"caveat: {ds.source['caveat']}")
     return 0

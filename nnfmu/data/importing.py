@@ -134,9 +134,30 @@ def _stack(table: Table, cols: list[tuple[str, ...]], where: str) -> np.ndarray:
 _TIMING = ("Ts", "time_column", "Ts_column", "fs_column")
 
 
-def _sample_time(reader: _Reader, files: dict, timing: dict) -> float:
-    """The files' sample time in s from exactly one of ``timing``'s keys (see :func:`load_files`)."""
+#: Columns that carry the timing by their name alone, used when no timing is given: the kind each one is.
+TIMING_COLUMNS = {"Ts": "Ts_column", "fs": "fs_column", "time": "time_column"}
+
+
+def _named_timing(reader: _Reader, files: dict, notes: list) -> dict:
+    """The timing of the training files' one column named ``Ts``, ``fs`` or ``time`` (none, or several: {})."""
+    first = files["train"][0]
+    found = [name for name in TIMING_COLUMNS if name in reader.table(first).columns]
+    if len(found) != 1:
+        return {}
+    kind = TIMING_COLUMNS[found[0]]
+    what = {"Ts_column": "the sample time in s", "fs_column": "the sample rate in Hz", "time_column": "time in s"}
+    notes.append(f"no sample time given: used the column {found[0]!r} of {first.name} as {what[kind]} (CLI: "
+                 "--Ts, --time, --Ts-column or --fs-column choose another)")
+    return {kind: found[0]}
+
+
+def _sample_time(reader: _Reader, files: dict, timing: dict, notes: list) -> float:
+    """The files' sample time in s from exactly one of ``timing``'s keys (see :func:`load_files`); with none, from
+    a column named ``Ts``, ``fs`` or ``time`` (:data:`TIMING_COLUMNS`). ``notes`` gets what was assumed."""
     given = [k for k in _TIMING if timing.get(k) is not None]
+    if not given:
+        timing = _named_timing(reader, files, notes)
+        given = list(timing)
     if len(given) != 1:
         raise DataError("give the sample time one way: Ts (in s), a time column (time_column; CLI --time), or a "
                         "column or variable holding Ts in s (Ts_column; CLI --Ts-column) or the rate in Hz "
@@ -153,7 +174,7 @@ def _sample_time(reader: _Reader, files: dict, timing: dict) -> float:
         table = reader.table(path)
         if kind == "time_column":
             (col,) = table.resolve(timing[kind])
-            per_file[str(path)] = measured_step(table.columns[col], f"{path}: the time column {col!r}")
+            per_file[str(path)] = measured_step(table.columns[col], f"{path.name}: the time column {col!r}", notes)
             continue
         value = table.setting(timing[kind])
         if not (np.isfinite(value) and value > 0):
@@ -232,8 +253,9 @@ def load_files(
     input_entries = entries(inputs, "inputs")
     base, n_in = input_entries + entries(outputs, "outputs"), len(input_entries)
     reader = _Reader(None if fmt is None else format_of(Path(), fmt))
+    notes: list = []
     Ts_files = _sample_time(reader, file_lists, {"Ts": Ts, "time_column": time_column, "Ts_column": Ts_column,
-                                                 "fs_column": fs_column})
+                                                 "fs_column": fs_column}, notes)
     first = file_lists["train"][0]
     names = _names(reader.table(first), base, reader.columns(first, base), n_in)
     seen: dict = {}
@@ -241,6 +263,8 @@ def load_files(
                                _override(base, columns[split], split) if split in columns else base,
                                names, resample, seen) for split in splits}
     source = _source(file_lists, columns, splits, reader, base, resample, Ts_files)
+    if notes:
+        source["notes"] = notes
     Ts = Ts_files if resample == 1 else float(f"{Ts_files * resample:.15g}")  # 3 x 0.1: 0.3, not 0.30000000000000004
     ds = Dataset(Ts=Ts, inputs=tuple(names[0]), outputs=tuple(names[1]), splits=data,
                  source=source).with_units(units)

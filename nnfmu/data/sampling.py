@@ -4,6 +4,7 @@
   1 %, and rounded to what the column resolves. Time stamps written with 4 decimals give a step
   with 4 decimals: ``0.1`` rather than the ``0.09999999999994458`` that subtracting ``1000.1 - 1000.0``
   leaves in binary floating point.
+  A step of more than 6 significant digits gives the roundest Ts within :data:`AGREE_RTOL`.
 - :func:`common_sample_time`: records whose sample times agree to :data:`AGREE_RTOL` (relative)
   are one dataset; its Ts is the training records' median. Measured records of one benchmark differ
   in the last digits (the two EMPS axis files by 0.0024 %); a larger difference is refused with
@@ -47,8 +48,22 @@ def round_to_resolution(Ts: float, t: np.ndarray) -> float:
     return rounded if rounded > 0 and abs(rounded - Ts) <= _ROUND_RTOL * Ts else float(Ts)
 
 
-def measured_step(t: np.ndarray, where: str) -> float:
-    """The sample time (s) of time stamps ``t`` (n,) in s: the median step, rounded to the column's resolution."""
+def snap(Ts: float) -> float:
+    """The roundest value (fewest significant digits, up to 3) within :data:`AGREE_RTOL` of ``Ts``, else ``Ts``:
+    a 1 kHz record's time vector steps 0.0009999839611 s, which is 0.001 s; 1/3 s has no such value and stays."""
+    for digits in range(1, 4):
+        rounded = float(f"{Ts:.{digits}g}")
+        if abs(rounded - Ts) <= AGREE_RTOL * Ts:
+            return rounded
+    return float(Ts)
+
+
+def measured_step(t: np.ndarray, where: str, notes: list | None = None) -> float:
+    """The sample time (s) of time stamps ``t`` (n,) in s: the median step, rounded to the column's resolution.
+
+    A step of more than 6 significant digits (a computed or measured time vector: 0.0009999839611 s) becomes
+    the roundest value within :data:`AGREE_RTOL` (:func:`snap`); ``notes`` then gets a line that says so.
+    """
     t = np.asarray(t, dtype=np.float64)
     if len(t) < 2:
         raise DataError(f"{where} has {len(t)} row(s); measuring the sample time needs at least 2 (or give Ts)")
@@ -57,7 +72,14 @@ def measured_step(t: np.ndarray, where: str) -> float:
     if not np.all(np.isfinite(dt)) or not Ts > 0 or np.abs(dt - Ts).max() > UNIFORM_RTOL * Ts:
         raise DataError(f"{where} is not uniformly increasing (steps from {np.nanmin(dt):g} to {np.nanmax(dt):g} "
                         "s); resample the record first, or give Ts instead")
-    return round_to_resolution(Ts, t)
+    Ts = round_to_resolution(Ts, t)
+    if float(f"{Ts:.6g}") == Ts:  # stamps in decimals (0.12341 s): taken as written
+        return Ts
+    snapped = snap(Ts)
+    if snapped != Ts and notes is not None:
+        notes.append(f"{where}: its median step {Ts:.10g} s is taken as {snapped:g} s (they agree to "
+                     f"{abs(snapped - Ts) / Ts:.1e}, within {AGREE_RTOL:g}); give Ts to force another")
+    return snapped
 
 
 def common_sample_time(per_record: Mapping[str, float], train: list[str], how: str) -> float:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nnfmu.data.sampling import AGREE_RTOL
 from nnfmu.errors import ConfigError, DataError
 from nnfmu.physics.base import PhysicsSystem
 
@@ -90,7 +91,7 @@ def check_dataset(system: PhysicsSystem, dataset) -> None:
             show = lambda pairs: ", ".join(f"{n} [{u}]" for n, u in pairs)  # noqa: E731
             raise DataError(f"the dataset's {what} ({show(got)}) are not the model's ({show(want)}); import the "
                             f"data with the model's names and units (nnfmu import --inputs/--outputs/--units)")
-    if not np.isclose(dataset.Ts, system.Ts, rtol=1e-9, atol=0.0):
+    if not np.isclose(dataset.Ts, system.Ts, rtol=AGREE_RTOL, atol=0.0):  # as records agree with each other
         raise DataError(f"the dataset's sample time is {dataset.Ts:g} s but the model {system.name!r} steps at "
                         f"{system.Ts:g} s; resample the data (nnfmu import --resample) or set the model's Ts")
 
