@@ -5,6 +5,8 @@
   with 4 decimals: ``0.1`` rather than the ``0.09999999999994458`` that subtracting ``1000.1 - 1000.0``
   leaves in binary floating point.
   A step of more than 6 significant digits gives the roundest Ts within :data:`AGREE_RTOL`.
+- :func:`sample_time`: the files' Ts from one of the timing options, or from a column named ``Ts``, ``fs`` or
+  ``time`` when none is given.
 - :func:`common_sample_time`: records whose sample times agree to :data:`AGREE_RTOL` (relative)
   are one dataset; its Ts is the training records' median. Measured records of one benchmark differ
   in the last digits (the two EMPS axis files by 0.0024 %); a larger difference is refused with
@@ -94,3 +96,55 @@ def common_sample_time(per_record: Mapping[str, float], train: list[str], how: s
         raise DataError(f"the records' sample times differ by more than {AGREE_RTOL:g} (relative) from the training "
                         f"records' {Ts:.10g} s ({shown}); {how}, or resample the records to one Ts")
     return Ts
+
+
+_TIMING = ("Ts", "time_column", "Ts_column", "fs_column")
+#: Columns that carry the timing by their name alone, used when no timing is given: the kind each one is.
+TIMING_COLUMNS = {"Ts": "Ts_column", "fs": "fs_column", "time": "time_column"}
+
+
+def _named_timing(reader, files: dict, notes: list) -> dict:
+    """The timing of the training files' one column named ``Ts``, ``fs`` or ``time`` (none, or several: {})."""
+    first = files["train"][0]
+    found = [name for name in TIMING_COLUMNS if name in reader.table(first).columns]
+    if len(found) != 1:
+        return {}
+    kind = TIMING_COLUMNS[found[0]]
+    what = {"Ts_column": "the sample time in s", "fs_column": "the sample rate in Hz", "time_column": "time in s"}
+    notes.append(f"no sample time given: used the column {found[0]!r} of {first.name} as {what[kind]} (CLI: "
+                 "--Ts, --time, --Ts-column or --fs-column choose another)")
+    return {kind: found[0]}
+
+
+def sample_time(reader, files: dict, timing: dict, notes: list) -> float:
+    """The files' sample time in s from exactly one of ``timing``'s keys (see :func:`nnfmu.data.load_files`); with
+    none, from a column named ``Ts``, ``fs`` or ``time`` (:data:`TIMING_COLUMNS`). ``reader.table(path)`` gives a
+    file's :class:`~nnfmu.data.tables.Table`; ``notes`` gets what was assumed."""
+    given = [k for k in _TIMING if timing.get(k) is not None]
+    if not given:
+        timing = _named_timing(reader, files, notes)
+        given = list(timing)
+    if len(given) != 1:
+        raise DataError("give the sample time one way: Ts (in s), a time column (time_column; CLI --time), or a "
+                        "column or variable holding Ts in s (Ts_column; CLI --Ts-column) or the rate in Hz "
+                        f"(fs_column; CLI --fs-column); got {' and '.join(given) if given else 'none'}")
+    (kind,) = given
+    if kind == "Ts":
+        Ts = float(timing["Ts"])
+        if not (np.isfinite(Ts) and Ts > 0):
+            raise DataError(f"the sample time Ts (CLI --Ts) must be a positive number of seconds, "
+                            f"got {timing['Ts']!r}")
+        return Ts
+    per_file = {}
+    for path in dict.fromkeys(p for group in files.values() for p in group):
+        table = reader.table(path)
+        if kind == "time_column":
+            (col,) = table.resolve(timing[kind])
+            per_file[str(path)] = measured_step(table.columns[col], f"{path.name}: the time column {col!r}", notes)
+            continue
+        value = table.setting(timing[kind])
+        if not (np.isfinite(value) and value > 0):
+            raise DataError(f"{path}: {timing[kind]!r} holds {value:g}; a sample "
+                            f"{'time' if kind == 'Ts_column' else 'rate'} must be positive")
+        per_file[str(path)] = value if kind == "Ts_column" else 1.0 / value
+    return common_sample_time(per_file, [str(p) for p in files["train"]], "give Ts to force one")
