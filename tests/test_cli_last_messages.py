@@ -11,13 +11,13 @@ import os
 import pytest
 from fmu_cases import oscillator_dataset
 from slider_cases import slider_dataset
+from test_cli_messages import META
+from test_cli_nothing_lost import one_line_error
 
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.models import ModelConfig, build_model, save_checkpoint
 
 pytestmark = pytest.mark.usefixtures("one_thread")
-META = {"name": "osc_gru", "Ts": 0.01, "inputs": [{"name": "force", "unit": "N"}],
-        "outputs": [{"name": "pos", "unit": "m"}, {"name": "vel", "unit": "m/s"}]}
 
 
 @pytest.fixture(scope="module")
@@ -32,14 +32,6 @@ def work(tmp_path_factory):
     (root / "d2.csv").write_text(csv.read_text())
     return {"root": root, "data": str(data), "ckpt": str(ckpt), "lin": str(lin), "csv": str(csv),
             "csv2": str(root / "d2.csv"), "slider": str(slider_dataset(0, root)[1])}
-
-
-def one_line_error(capsys, *words: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert "\n" not in err and ": error: " in err and "Traceback" not in err, err
-    for word in words:
-        assert word in err, err
-    return err
 
 
 READS = {  # a command, and the file it reads that the test makes unreadable
