@@ -26,7 +26,8 @@ def work(tmp_path_factory):
     data = oscillator_dataset(root / "data")
     ckpt = save_checkpoint(root / "g.pt", build_model(ModelConfig(arch="gru", n_u=1, n_y=2, hidden=4), META))
     lin = root / "lin.json"
-    assert nnfmu_main(["linear", "--data", str(data), "--order", "2", "--no-refine", "--quiet", "--save", str(lin)]) == 0
+    assert nnfmu_main(["linear", "--data", str(data), "--order", "2", "--no-refine", "--quiet",
+                       "--save", str(lin)]) == 0
     csv = root / "d.csv"
     csv.write_text("u,y\n" + "".join(f"{k % 7 - 3},{k % 5}\n" for k in range(60)))
     (root / "d2.csv").write_text(csv.read_text())

@@ -146,7 +146,8 @@ def test_fmusim_model_exchange_with_cvode_at_input_steps_matches_co_simulation(f
     stop = ["--stop-time", repr((n - 1) * Ts), "--output-interval", repr(Ts)]
     cs = run_fmusim(fmusim, fmu, tmp_path / "cs.csv", "--interface-type", "cs", *stop,
                     "--input-file", str(write_inputs(tmp_path / "u_cs.csv", t, u, names, events=False)))
-    me = run_fmusim(fmusim, fmu, tmp_path / "me.csv", "--interface-type", "me", "--solver", "cvode", "--tolerance", "1e-10", *stop,
+    me = run_fmusim(fmusim, fmu, tmp_path / "me.csv", "--interface-type", "me", "--solver", "cvode",
+                    "--tolerance", "1e-10", *stop,
                     "--input-file", str(write_inputs(tmp_path / "u_me.csv", t, u, names, events=True)))
     at_samples = [np.flatnonzero(np.abs(me[:, 0] - k * Ts) < 1e-6 * Ts)[-1] for k in range(n)]  # after events
     me = me[at_samples]

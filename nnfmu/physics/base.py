@@ -109,8 +109,8 @@ def check_model_header(name, n_sub) -> None:
         raise ConfigError(f"model name {name!r} is not valid: it names the FMU and its C functions, so it starts with "
                           f"a letter and holds only ASCII letters, digits and single underscores; e.g. {fix!r}")
     if isinstance(n_sub, bool) or not isinstance(n_sub, int) or not 1 <= n_sub <= MAX_RK4_SUBSTEPS:
-        raise ConfigError(f"{name}: n_sub must be a whole number from 1 to {MAX_RK4_SUBSTEPS:,} "
-                          f"(nnfmu.limits.MAX_RK4_SUBSTEPS), got {n_sub!r}; give the RK4 sub-steps per sample in that range")
+        raise ConfigError(f"{name}: n_sub must be a whole number from 1 to {MAX_RK4_SUBSTEPS:,} (nnfmu.limits."
+                          f"MAX_RK4_SUBSTEPS), got {n_sub!r}; give the RK4 sub-steps per sample in that range")
 
 
 def _check_ports(fn: ca.Function, ins: list[str], outs: list[str], what: str) -> None:
