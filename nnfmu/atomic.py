@@ -19,6 +19,7 @@ import errno
 import os
 import re
 import secrets
+import stat
 import sys
 import time
 from pathlib import Path
@@ -33,8 +34,6 @@ _OS_ERROR_HINTS = {  # by errno name (not every platform has every name)
     "ENOSPC": "free some disk space or choose another location",
     "EDQUOT": "free some of your disk quota or choose another location",
     "EFBIG": "the file system or a limit refuses a file this large; choose another location",
-    "EACCES": "choose a location you may write to",
-    "EPERM": "choose a location you may write to",
     "EROFS": "the file system is read-only; choose another location",
     "ENOTDIR": "a part of the path is a file, not a folder; choose another path",
     "EISDIR": "it is a folder; give the path of a file",
@@ -42,12 +41,46 @@ _OS_ERROR_HINTS = {  # by errno name (not every platform has every name)
 }
 
 
-def describe_os_error(exc: OSError, path: str | os.PathLike | None = None) -> str:
-    """One line for ``exc``: the path (``path`` if given, else the error's own), the cause and what to do."""
+_PERMISSION_HINTS = {  # by what failed: a refused read is never fixed by writing elsewhere
+    "write": "choose a location you may write to",
+    "read": "check that you may read it and its folders",
+    "either": "check the permissions of it and its folders",
+}
+
+
+def describe_os_error(exc: OSError, path: str | os.PathLike | None = None, *, doing: str = "either") -> str:
+    """One line for ``exc``: the path (``path`` if given, else the error's own), the cause and what to do.
+
+    ``doing``: ``"write"``, ``"read"`` or ``"either"`` (not known: a refused permission gets the fix that fits
+    both), for the fix of a refused permission.
+    """
     where = str(path) if path is not None else " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f)
     cause = exc.strerror or str(exc)
-    hint = _OS_ERROR_HINTS.get(errno.errorcode.get(exc.errno, ""))
+    name = errno.errorcode.get(exc.errno, "")
+    hint = _PERMISSION_HINTS[doing] if name in ("EACCES", "EPERM") else _OS_ERROR_HINTS.get(name)
     return f"{where + ': ' if where else ''}{cause}" + (f"; {hint}" if hint else "")
+
+
+_SPECIAL = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", stat.S_IFIFO: "a FIFO (named pipe)",
+            stat.S_IFSOCK: "a socket"}
+
+
+def resolve_target(path: str | os.PathLike) -> Path:
+    """Where a write of ``path`` lands: the file a symbolic link points to, or ``path`` itself.
+
+    Raises :class:`DataFileError` if that is a device node, a FIFO or a socket: renaming a file over one would
+    destroy it (``/dev/full`` becoming a regular file, for root), and writing into one is not a file's write.
+    """
+    path = Path(path)
+    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    try:
+        kind = _SPECIAL.get(stat.S_IFMT(target.stat().st_mode))
+    except OSError:
+        return target  # absent (or unreadable): the write itself says why
+    if kind:
+        via = f" (the link {path} points to it)" if target != path else ""
+        raise DataFileError(f"cannot write {target}{via}: it is {kind}, not a regular file; give the path of a file")
+    return target
 
 
 def _temp_pattern(path: Path, suffix: str) -> re.Pattern:
@@ -130,9 +163,10 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None], suffix:
     choose the format by extension. Missing parent folders are created. On any error,
     including Ctrl-C and SIGTERM, the temporary file and the folders created are removed
     and the exception propagates; an ``OSError`` propagates as :class:`DataFileError`
-    naming ``path``.
+    naming ``path``. A symbolic link is written through (its target gets the content, the
+    link stays); a device node, FIFO or socket is refused (:func:`resolve_target`).
     """
-    path = Path(path)
+    path = resolve_target(path)
     created: list[Path] = []
     tmp = None
     try:
@@ -146,7 +180,7 @@ def write_atomic(path: str | os.PathLike, write: Callable[[Path], None], suffix:
             tmp.unlink(missing_ok=True)
         _remove_empty(created)
         if isinstance(exc, OSError) and not isinstance(exc, DataFileError):
-            raise DataFileError(f"cannot write {describe_os_error(exc, path)}") from exc
+            raise DataFileError(f"cannot write {describe_os_error(exc, path, doing='write')}") from exc
         raise
     return path
 

@@ -9,7 +9,10 @@ line checks sizes here first:
   :func:`nnfmu.models.size.check_network_size`, which sits above the networks it builds);
 - ``--batch-size`` at most :data:`MAX_BATCH_SIZE` trajectories or windows;
 - ``nnfmu linear --order/--max-order`` at most :data:`MAX_LINEAR_ORDER` states;
-- ``nnfmu physics-fmu --n-sub`` at most :data:`MAX_RK4_SUBSTEPS` RK4 sub-steps per sample.
+- ``nnfmu physics-fmu --n-sub``, and a model file's ``n_sub``, at most :data:`MAX_RK4_SUBSTEPS` RK4
+  sub-steps per sample;
+- a model name (``export --name``, a model file's name) at most :data:`MAX_MODEL_NAME` characters: it names the
+  FMU's binary and source files, and file names end at 255 bytes.
 
 The limits are far above what the paper's study uses (GRU-64: 13 k parameters)
 and what an FMU can hold in practice; the messages name them and the fix.
@@ -23,6 +26,7 @@ MAX_PARAMETERS = 50_000_000
 MAX_BATCH_SIZE = 100_000
 MAX_LINEAR_ORDER = 200
 MAX_RK4_SUBSTEPS = 10_000
+MAX_MODEL_NAME = 128
 #: An epoch limit that no time budget reaches: ``TrainConfig(epochs=UNBOUNDED_EPOCHS, max_minutes=M)``
 #: trains until the wall-clock budget ends (``nnfmu train --max-minutes M`` alone), and its progress bar
 #: counts time instead of epochs.

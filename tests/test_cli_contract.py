@@ -83,6 +83,35 @@ def test_a_path_through_a_regular_file_is_one_line_and_status_2(work, capsys, na
     assert sorted(p.name for p in work["root"].iterdir()) == ["afile", "data", "gru.pt", "lin.fmu"]
 
 
+WRITERS = ["export", "linear -o", "linear --save", "physics-fmu", "evaluate --json", "evaluate --plots", "train",
+           "reproduce", "demo", "generate"]
+
+
+@pytest.mark.parametrize("name", WRITERS)
+def test_an_output_that_is_a_fifo_is_refused_and_left_a_fifo(work, tmp_path, capsys, name):
+    """A FIFO (or a device node: tests/test_cli_nothing_lost.py) at an output is never replaced by a file."""
+    argv, out = commands(work, tmp_path)[name]
+    os.mkfifo(out)
+    assert nnfmu_main(argv) == 2
+    assert_one_line_error(capsys, f"nnfmu {argv[0]}", str(out))
+    assert stat.S_ISFIFO(os.lstat(out).st_mode) and sorted(tmp_path.iterdir()) == [out]
+
+
+@pytest.mark.parametrize("name", [w for w in WRITERS if w not in ("reproduce", "demo")])  # those: whole studies
+def test_an_output_that_is_a_symlink_is_written_to_its_target_or_refused(work, tmp_path, capsys, name):
+    """Either the link's target holds the result, or the command exits 2 with one line; the link stays a link."""
+    argv, out = commands(work, tmp_path)[name]
+    target = tmp_path / "real" / out.name
+    target.parent.mkdir()
+    out.symlink_to(target)
+    status = nnfmu_main(argv)
+    assert out.is_symlink() and os.readlink(out) == str(target)
+    if status == 0:
+        assert target.exists()
+    else:
+        assert status == 2 and "\n" not in capsys.readouterr().err.strip()
+
+
 def test_python_m_nnfmu_export_keeps_the_contract(work, capsys):
     assert export_main([str(work["ckpt"]), "-o", str(work["afile"] / "m.fmu")]) == 2
     assert_one_line_error(capsys, "python -m nnfmu.export", "afile", "is a file, not a folder")

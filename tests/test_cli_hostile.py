@@ -178,7 +178,7 @@ TEXT = {"target_isa", "platforms", "name", "address", "device", "grid", "size", 
 TEXT |= {"free", "fixed", "bounds", "start"}  # fit: parameter names and NAME=VALUE lists
 #: Commands whose outputs are checked when written, not before the work starts (their writers keep the contract
 #: at write time; tests/test_cli_contract.py writes through them for real).
-LATE_OUTPUT_CHECK = {"demo", "generate", "import"}
+LATE_OUTPUT_CHECK = {"generate", "import"}
 
 
 def _path_actions() -> list[tuple[str, argparse.Action]]:

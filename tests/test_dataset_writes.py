@@ -85,3 +85,16 @@ def test_an_imported_dataset_is_named_after_its_folder(tmp_path):
     assert main(["import", "csv", str(tmp_path / "tanks_run1.csv"), "--inputs", "u", "--outputs", "y", "--Ts",
                  "1", "--test-columns", "y,u", "-o", str(tmp_path / "2tanks-data")]) == 0
     assert load_dataset(tmp_path / "2tanks-data").source["name"] == "d_2tanks_data"  # an identifier
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o755), (0o027, 0o750)])
+def test_a_dataset_folder_follows_the_umask(tmp_path, umask, mode):
+    """Issue 37, item 8: the folder was created 0700 (tempfile.mkdtemp) whatever the umask, so nobody else could
+    read a dataset shared on a group folder."""
+    old = os.umask(umask)
+    try:
+        save_dataset(_tiny(), tmp_path / "d")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "d").stat().st_mode & 0o777 == mode
+    assert (tmp_path / "d" / "meta.json").stat().st_mode & 0o777 == mode & 0o666

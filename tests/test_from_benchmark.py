@@ -127,3 +127,27 @@ def test_cli_names_the_channels_takes_ts_and_records_that_agree_to_1e_4(tmp_path
     assert "--inputs: for nonlinear-benchmark it names the channels" in capsys.readouterr().err
     assert main(["import", "robot-benchmark", "r.mat", "--Ts", "2", "-o", str(tmp_path / "f")]) == 2
     assert "robot-benchmark takes one FILE and none of --Ts" in capsys.readouterr().err
+
+
+def test_the_extracted_files_in_data_dir_are_used_without_their_archive(tmp_path, monkeypatch):
+    """Issue 37, item 9: with SilverboxFiles/*.mat extracted in --data-dir but no SilverboxFiles.zip, the package
+    downloaded again (and failed offline)."""
+    import scipy.io
+
+    from nnfmu.cli import main
+
+    load = nonlinear_benchmarks.Silverbox
+
+    def no_download(*args, **kwargs):
+        raise AssertionError("the benchmark was downloaded although its files are in --data-dir")
+
+    monkeypatch.setitem(load.__globals__, "cashed_download", no_download)
+    folder = tmp_path / "Silverbox" / "SilverboxFiles"
+    folder.mkdir(parents=True)
+    v1 = np.sin(np.arange(127_500) * 0.01)[None, :]
+    for name in ("SNLS80mV.mat", "Schroeder80mV.mat"):
+        scipy.io.savemat(folder / name, {"V1": v1, "V2": 0.5 * v1})
+    assert main(["import", "nonlinear-benchmark", "Silverbox", "--data-dir", str(tmp_path),
+                 "-o", str(tmp_path / "sb")]) == 0
+    assert load_dataset(tmp_path / "sb").Ts == pytest.approx(1 / 610.35)
+    assert sorted(p.name for p in (tmp_path / "Silverbox").iterdir()) == ["SilverboxFiles"]  # nothing downloaded

@@ -125,3 +125,49 @@ def test_a_column_of_objects_or_text_is_not_numeric_rather_than_missing(tmp_path
         with pytest.raises(DataError, match=rf"'{ref}' {what}.*not a numeric signal; save it as a float"):
             load_files({"train": tmp_path / "o.npz", "test": tmp_path / "o.npz"}, inputs=[ref], outputs=["y"],
                        Ts=1.0, columns={"test": ["y", "y"]})
+
+
+def test_a_measured_sample_time_of_float_noise_is_snapped_to_its_round_value_and_said(tmp_path, capsys):
+    """Issue 37, item 9: the 1 kHz axis record's time vector gave Ts = 0.0009999839611 s, which a model's
+    Ts = 0.001 refused."""
+    import scipy.io
+
+    t = 12.345678901 + np.arange(400) * 0.0009999839611
+    for name in ("a.mat", "b.mat"):
+        scipy.io.savemat(tmp_path / name, {"t": t[:, None], "u": np.sin(t)[:, None], "y": np.cos(t)[:, None]})
+    assert main(["import", "mat", str(tmp_path / "a.mat"), "--time", "t", "--inputs", "u", "--outputs", "y",
+                 "--test", str(tmp_path / "b.mat"), "-o", str(tmp_path / "d")]) == 0
+    assert load_dataset(tmp_path / "d").Ts == 0.001
+    assert "its median step 0.0009999839611 s is taken as 0.001 s" in capsys.readouterr().out
+
+
+def test_a_column_named_ts_fs_or_time_gives_the_sample_time_when_none_is_given(tmp_path, capsys):
+    """Issue 37, item 9: the two-tank CSV carries its sample time in a column named Ts."""
+    for name, head, first in (("ts", "Ts", 4.0), ("fs", "fs", 0.25), ("time", "time", None)):
+        rows = [f"{first if first is not None else 4.0 * k},{k % 3},{k % 5}" for k in range(20)]
+        for f in ("a.csv", "b.csv"):
+            (tmp_path / f).write_text(f"{head},u,y\n" + "\n".join(rows) + "\n")
+        out = tmp_path / name
+        assert main(["import", "csv", str(tmp_path / "a.csv"), "--inputs", "u", "--outputs", "y",
+                     "--test", str(tmp_path / "b.csv"), "-o", str(out)]) == 0
+        assert load_dataset(out).Ts == 4.0
+        assert f"no sample time given: used the column {head!r} of a.csv" in capsys.readouterr().out
+
+
+def test_a_models_sample_time_meets_the_datas_within_the_same_tolerance():
+    import dataclasses
+
+    from nnfmu.data import from_arrays
+    from nnfmu.greybox.setup import check_dataset
+    from nnfmu.physics import slider_system
+
+    system = slider_system()
+    u = [np.ones((20, 1))] * 2
+
+    def data(Ts):
+        return from_arrays(Ts=Ts, u_train=u, y_train=u, u_test=u, y_test=u, input_names=["F"],
+                           output_names=["pos"]).with_units({"F": "N", "pos": "m"})
+
+    check_dataset(system, data(system.Ts * (1 + 5e-5)))  # a measured 0.0099995 s is the model's 0.01 s
+    with pytest.raises(DataError, match="sample time"):
+        check_dataset(dataclasses.replace(system), data(system.Ts * (1 + 5e-4)))

@@ -105,5 +105,8 @@ def test_csv_loader(tmp_path):
     with pytest.raises(DataError, match=r"has no column 'torque'; its columns are: time, volt, speed"):
         load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["torque"], outputs=["speed"],
                  Ts=0.5)
+    named = load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["volt"], outputs=["speed"])
+    assert named.Ts == 0.5 and "used the column 'time'" in named.source["notes"][0]  # no timing given: by its name
     with pytest.raises(DataError, match="give the sample time one way"):
-        load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["volt"], outputs=["speed"])
+        load_csv({"train": tmp_path / "a.csv", "test": tmp_path / "c.csv"}, inputs=["volt"], outputs=["speed"],
+                 Ts=0.5, time_column="time")

@@ -75,6 +75,30 @@ def test_an_invalid_grid_fails_before_ray_starts():
         check_grid("tcn", Hyper(layers=3), {"window": (4,)}, 2, 2)
 
 
+@pytest.mark.parametrize("value", ["nan", "-1", "inf", "0"])
+def test_a_training_value_outside_trains_range_fails_before_ray_starts(value):
+    with pytest.raises(ConfigError, match="tune grid point .*lr.* is invalid for gru: lr must be"):
+        check_grid("gru", Hyper(), {"lr": (0.001, float(value))}, 1, 1)
+
+
+@pytest.mark.parametrize("grid, flag", [(["lr=0.001,nan"], "--grid lr"), (["lr=-1"], "--grid lr"),
+                                        (["lr=20"], "--grid lr"), (["hidden=0"], "--grid hidden"),
+                                        (["dropout=1.5"], "--grid dropout")])
+def test_the_cli_grid_follows_the_train_options_rules(tmp_path, capsys, monkeypatch, grid, flag):
+    from fmu_cases import oscillator_dataset
+
+    import nnfmu.study.tune
+
+    monkeypatch.setattr(nnfmu.study.tune, "ray_session", None)  # Ray must not start
+    data = oscillator_dataset(tmp_path / "data")
+    out = tmp_path / "best.json"
+    assert main(["tune", "--data", str(data), "--arch", "gru", "--system", "valve", "--grid", *grid,
+                 "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"nnfmu tune: error: {flag} must be") and "\n" not in err, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("grid, error, match", [
     (["hidden"], ConfigError, "expects FIELD=V1,V2"),
     (["hiden=3"], UnknownOptionError, "unknown --grid option"),

@@ -197,3 +197,26 @@ def test_a_model_without_parameters_has_no_p_port_and_one_without_inputs_is_not_
     free.output("s", "", "", s, start=1.0)
     with pytest.raises(ConfigError, match="free has no inputs"):
         generate_model_dataset(free.build())
+
+
+def test_an_inputs_start_defaults_inside_its_range_and_is_checked_there():
+    """Issue 37, item 7: an input with min=5, max=10 passed info and generate, but physics-fmu refused its start 0."""
+    import casadi as ca
+
+    from nnfmu.export.model_description import check_spec
+
+    def tank(**start):
+        m = ModelBuilder("tank", Ts=0.1)
+        h = m.state("h", "m")
+        q = m.input("q", "m3/s", min=5, max=10, **start)
+        w = m.input("w", "m3/s", min=-1, max=3)
+        m.output("level", "m", "level", h)
+        m.ode(h=q + w - ca.sqrt(h * h + 1))
+        return m.build()
+
+    system = tank()
+    assert [v.start for v in system.inputs] == [7.5, 0.0]  # the range's middle where it excludes 0, else 0
+    check_spec(system.model().spec)  # what physics-fmu checks before writing the FMU
+    assert tank(start=6.0).inputs[0].start == 6.0
+    with pytest.raises(ConfigError, match="input 'q' has start value 2 outside its bounds \\[5, 10\\]"):
+        tank(start=2.0)

@@ -19,7 +19,8 @@ The contract of every command (:func:`run`):
 - files are written atomically (:mod:`nnfmu.atomic`), so a failed command
   leaves no partial file at its output;
 - Ctrl-C exits with 130 and SIGTERM with 143 (128 + the signal number), after
-  the same clean-up.
+  the same clean-up; a closed output pipe (``nnfmu info D | head -1``) ends quietly with 141, as SIGPIPE
+  ends other tools.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import os
 import pkgutil
 import signal
 import sys
@@ -38,6 +40,7 @@ from nnfmu.cli._checks import check_numbers
 from nnfmu.errors import NnfmuError
 
 SIGINT_STATUS, SIGTERM_STATUS = 128 + signal.SIGINT, 128 + signal.SIGTERM
+SIGPIPE_STATUS = 128 + 13  # SIGPIPE's number on POSIX (Windows has no signal.SIGPIPE)
 
 class Terminated(BaseException):
     """Raised in the main thread when SIGTERM arrives, so that writers clean up like on Ctrl-C."""
@@ -100,6 +103,10 @@ def run(func, args: argparse.Namespace, prog: str, parser: argparse.ArgumentPars
     except NnfmuError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (``nnfmu info D | head -1``): end as a killed writer, quietly
+        with contextlib.suppress(OSError, ValueError):  # so that the flush at exit is silent too
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return SIGPIPE_STATUS
     except OSError as exc:
         print(f"{prog}: error: {describe_os_error(exc)}", file=sys.stderr)
         return 2

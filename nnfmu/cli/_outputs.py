@@ -40,15 +40,16 @@ def check_writable(*targets: str | os.PathLike | None) -> None:
     """Raise :class:`~nnfmu.errors.DataFileError` naming the first target whose folder refuses a new file.
 
     The probe creates and removes a file in the nearest existing folder (``os.access`` says yes to root even
-    on a read-only mount); a regular file in the way is named as such.
+    on a read-only mount); a regular file in the way is named as such, and so is a device node, FIFO or socket
+    at the target. A symbolic link is checked where it points: the write goes there.
     """
-    from nnfmu.atomic import describe_os_error
+    from nnfmu.atomic import describe_os_error, resolve_target
     from nnfmu.errors import DataFileError
 
     for target in targets:
         if target is None:
             continue
-        target = Path(target)
+        target = resolve_target(target)
         folder = _existing_ancestor(target.parent)
         if not folder.is_dir():
             raise DataFileError(f"cannot write {target}: {folder} is a file, not a folder; choose another path")
@@ -57,7 +58,7 @@ def check_writable(*targets: str | os.PathLike | None) -> None:
             os.close(fd)
             os.unlink(probe)
         except OSError as exc:
-            raise DataFileError(f"cannot write {describe_os_error(exc, target)}") from exc
+            raise DataFileError(f"cannot write {describe_os_error(exc, target, doing='write')}") from exc
 
 
 @contextlib.contextmanager

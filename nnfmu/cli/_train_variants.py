@@ -36,8 +36,7 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
                              progress=not args.quiet, device=device, threads=args.threads, linear=linear,
                              overwrite=args.force)
     except (KeyboardInterrupt, Terminated):
-        print(f"interrupted: the seeds' checkpoints are kept in {seeds_folder(out)}; run the same command again "
-              "to continue them")
+        print(_interrupted_seeds(seeds_folder(out)))
         raise
     for note in result.notes:
         print(f"note: {note}")
@@ -45,13 +44,34 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
         test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
         print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
     spread = result.spread()
-    what = {"ensemble": "the ensemble", "best": "the best", "select": "the selection"}[keep]
-    print(f"kept {what} of {seeds} seeds: validation free-run NRMSE {result.valid_nrmse:.4f}; "
-          f"checkpoint {out}")
+    print(f"kept {_kept(result, seeds)}: validation free-run NRMSE {result.valid_nrmse:.4f}; checkpoint {out}")
     if result.test is not None:
         print_test(ds, result.test, result.test_window, model_config.init_window)
         print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
     return 0
+
+
+def _kept(result, seeds: int) -> str:
+    """What the checkpoint holds: an ensemble of how many seeds, or which seed alone (``--keep ensemble`` keeps
+    one seed when fewer than two trained)."""
+    members = int(getattr(result.model.config, "members", 1) or 1)
+    if members > 1:
+        return f"the ensemble of {members} seeds" + (f" (of {seeds})" if members < seeds else "")
+    alone = [r["seed"] for r in result.seeds if r["best_valid_nrmse"] == result.valid_nrmse]
+    return f"seed {alone[0]} alone (of {seeds} seeds)" if alone else f"one seed alone (of {seeds})"
+
+
+def _interrupted_seeds(folder) -> str:
+    """What an interrupted ``--seeds`` run kept: the seeds' checkpoints, or nothing (then its empty folder goes)."""
+    kept = sorted(p.name for p in folder.glob("seed-*.pt")) if folder.is_dir() else []
+    if kept:
+        return (f"interrupted: the checkpoints of {', '.join(kept)} are kept in {folder}; run the same command "
+                "again to continue them")
+    try:
+        folder.rmdir()  # made for the seeds, and still empty
+    except OSError:
+        pass
+    return "interrupted before any seed wrote a checkpoint: nothing was kept"
 
 
 def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out, device, run_one) -> int:

@@ -24,7 +24,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from nnfmu.cli._outputs import check_writable
     from nnfmu.study import run_demo
 
+    check_writable(Path(args.out) / "results.md")  # a file at --out is named as such, before the first cell
     run_demo(args.out, seed=args.seed, progress=not args.quiet)
     return 0

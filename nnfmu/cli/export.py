@@ -108,10 +108,14 @@ def export_checkpoint(args: argparse.Namespace) -> int:
 
     from nnfmu.cli._outputs import check_writable
     from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_MODEL_NAME
     from nnfmu.models import load_model
 
     if args.name is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", args.name):
         raise ConfigError(f"--name must be an ASCII C identifier (letters, digits, '_'), got {args.name!r}")
+    if args.name is not None and len(args.name) > MAX_MODEL_NAME:  # before the compiler fails on the file names
+        raise ConfigError(f"--name has {len(args.name)} characters, above nnfmu's limit of {MAX_MODEL_NAME} "
+                          "(nnfmu.limits.MAX_MODEL_NAME): it names the FMU's files; choose a shorter --name")
     check_fmu_options(args)
     out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
     check_writable(out)

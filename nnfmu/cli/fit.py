@@ -120,6 +120,7 @@ def _summary(system, report: dict) -> list[str]:
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import check_writable
     from nnfmu.data import load_dataset
+    from nnfmu.errors import ConfigError
     from nnfmu.greybox import FitConfig, fit_greybox, save_fit
     from nnfmu.physics import resolve_physics
 
@@ -129,6 +130,9 @@ def _run(args: argparse.Namespace) -> int:
                        max_evaluations=args.max_evaluations, n_sub=args.n_sub, max_windows=args.max_windows,
                        compile=args.compile)
     out = Path(args.out)
+    if out.suffix.lower() != ".json":  # a fit in g.pt would be taken for a checkpoint by export and info
+        raise ConfigError(f"-o {out}: a fit is written as JSON; give a name ending in .json (e.g. -o "
+                          f"{out.with_suffix('.json').name})")
     check_writable(out)
     system = resolve_physics(args.system)
     dataset = load_dataset(args.data)

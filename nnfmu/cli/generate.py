@@ -48,10 +48,11 @@ def _check_writable(out: Path, force: bool) -> None:
     """Fail before simulating (which can take minutes) if the result could not be written."""
     from nnfmu.errors import DataFileError
 
+    from nnfmu.data.storage import check_replaceable
+
     if out.exists() and not force:
         raise DataFileError(f"{out} already exists; choose another folder or pass --force")
-    if out.exists() and not out.is_dir():
-        raise DataFileError(f"{out} is a file, expected a dataset folder; choose another path")
+    check_replaceable(out)  # --force replaces a dataset folder, never a folder of other files
     ancestor = out.resolve().parent
     while not ancestor.exists():
         ancestor = ancestor.parent

@@ -169,10 +169,12 @@ def _named_after(ds, out: str):
 
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.data import save_dataset
+    from nnfmu.data.storage import check_replaceable
     from nnfmu.errors import DataFileError
 
     if Path(args.out).exists() and not args.force:  # before reading what may be large files
         raise DataFileError(f"{args.out} already exists; choose another folder or pass --force")
+    check_replaceable(args.out)  # --force replaces a dataset folder, never a folder of other files
     for key in ("inputs", "outputs"):  # "--outputs a b c" and "--outputs a,b,c" are the same
         if getattr(args, key) is not None:
             setattr(args, key, ",".join(getattr(args, key)))
@@ -182,6 +184,8 @@ def _run(args: argparse.Namespace) -> int:
     print(ds.summary())
     if ds.valid is None:
         print("no validation split: 'nnfmu train' carves one out of train (--valid-fraction here fixes it once)")
+    for note in ds.source.get("notes", []):
+        print(f"note: {note}")
     if "caveat" in ds.source:
         print(f"caveat: {ds.source['caveat']}")
     return 0

@@ -114,6 +114,18 @@ def _held_out(dataset, fraction: float | None, blocks: int = 1):
     return dataset.with_validation(fraction, blocks=blocks), dataset.train
 
 
+def _check_varies(dataset) -> None:
+    """Refuse training data whose inputs and outputs are all constant: they show no dynamics to identify."""
+    import numpy as np
+
+    from nnfmu.errors import DataError
+
+    train = dataset.train
+    if all(np.ptp(np.concatenate(arrays), axis=0).max() == 0 for arrays in (train.u, train.y)):
+        raise DataError("the training data show no dynamics (every input and output is constant); a linear model "
+                        "needs data that vary: check the dataset's signals")
+
+
 def _run(args: argparse.Namespace) -> int:
     from nnfmu.cli._outputs import all_or_nothing, check_writable
     from nnfmu.data import load_dataset
@@ -136,6 +148,7 @@ def _run(args: argparse.Namespace) -> int:
         check_fmu_options(args)
     dataset, record = _held_out(load_dataset(args.data), args.holdout, args.valid_blocks)
     check_writable(args.out, args.save)  # both targets before the identification, which takes minutes
+    _check_varies(dataset)  # before the plan and the progress bars: their lines would precede the error
     print(_plan(args, config, dataset), flush=True)  # --quiet is not silent until the result
     model = identify_linear(dataset, config, progress=not args.quiet, refit_on=record)
     print("\n".join(_summary(model, dataset)))

@@ -242,6 +242,8 @@ def _run(args: argparse.Namespace) -> int:
     check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
     check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
     check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    if stored is None and out.exists():
+        _check_ours(out)
     linear, seeds = None, args.seeds
     if stored is None:
         given = {**_given(args, _TRAIN_OPTIONS), **({} if args.join is None else {"join": args.join})}
@@ -254,6 +256,18 @@ def _run(args: argparse.Namespace) -> int:
     if seeds is not None and seeds > 1:  # --seeds 1 is one plain training
         return run_seeds(args, ds, model_config, train_config, out, device, linear=linear, seeds=seeds)
     return _run_one(args, ds, model_config, train_config, out, device, linear=linear)
+
+
+def _check_ours(out) -> None:
+    """``--force`` overwrites a checkpoint nnfmu wrote, never another file."""
+    from nnfmu.errors import CheckpointError, DataFileError
+    from nnfmu.models import load_checkpoint
+
+    try:
+        load_checkpoint(out)
+    except CheckpointError as exc:
+        raise DataFileError(f"{out} is not an nnfmu checkpoint, so --force does not overwrite it; move it away or "
+                            "choose another --out") from exc
 
 
 def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None) -> int:

@@ -89,6 +89,8 @@ def parse_grid(items: list[str]) -> dict[str, tuple]:
     from nnfmu.errors import ConfigError, check_options
     from nnfmu.study import Hyper
 
+    from nnfmu.cli._checks import RULES, check_value
+
     types = typing.get_type_hints(Hyper)
     grid = {}
     for item in items:
@@ -101,6 +103,10 @@ def parse_grid(items: list[str]) -> dict[str, tuple]:
             grid[name] = tuple(None if v == "none" else convert(v) for v in values.split(","))
         except ValueError as exc:
             raise ConfigError(f"--grid {name}: {exc}; give {convert.__name__} values separated by commas") from exc
+        rule = RULES.get(("train", name)) or RULES.get(name)  # the same range as the train option of that name
+        for value in grid[name]:
+            if rule is not None and value is not None:
+                check_value(f"--grid {name}", value, rule)
     return grid
 
 

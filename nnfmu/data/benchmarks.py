@@ -11,6 +11,8 @@ keeps that number as the dataset's ``init_window`` (``meta.json``).
 
 from __future__ import annotations
 
+import contextlib
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -127,9 +129,36 @@ def fetch_benchmark(name: str, *, data_dir: str | None = None, **options) -> Dat
     if name not in BENCHMARKS:
         raise DataError(f"unknown benchmark {name!r}; choose one of {', '.join(BENCHMARKS)} (the ones split into "
                         "training and test data by the nonlinear_benchmarks package)")
+    load = getattr(nonlinear_benchmarks, name)
     try:
-        result = getattr(nonlinear_benchmarks, name)(dir_placement=data_dir)
+        with _extracted_files_used(load, data_dir):
+            result = load(dir_placement=data_dir)
     except Exception as exc:  # the package raises bare exceptions for download and file errors
         raise DataFileError(f"nonlinear_benchmarks.{name}() failed: {type(exc).__name__}: {exc}; it downloads the "
                             "data on first use, so it needs the network once (or its files in --data-dir)") from exc
     return from_benchmark(result, name=name, **options)
+
+
+@contextlib.contextmanager
+def _extracted_files_used(load, data_dir: str | None):
+    """While ``load`` runs: a benchmark folder in ``data_dir`` that holds the extracted files counts as present.
+
+    The package looks for its downloaded archive (``<data_dir>/<Name>/<Name>Files.zip``) and downloads again when
+    only the files extracted from it are there (someone copied the folder, or deleted the archive to save space).
+    """
+    fetch = load.__globals__.get("cashed_download")
+    if data_dir is None or fetch is None:
+        yield
+        return
+
+    def cached(url, name_dir, *args, dir_placement=None, **kwargs):
+        folder = Path(dir_placement if dir_placement is not None else data_dir) / name_dir
+        if folder.is_dir() and any(p.suffix.lower() in (".mat", ".csv") for p in folder.rglob("*")):
+            return str(folder)
+        return fetch(url, name_dir, *args, dir_placement=dir_placement, **kwargs)
+
+    load.__globals__["cashed_download"] = cached  # the name the package's loaders look up when they run
+    try:
+        yield
+    finally:
+        load.__globals__["cashed_download"] = fetch

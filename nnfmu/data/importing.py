@@ -21,7 +21,7 @@ import numpy as np
 
 from nnfmu.data.dataset import SPLIT_NAMES, Dataset, make_trajectories
 from nnfmu.data.resample import decimate
-from nnfmu.data.sampling import common_sample_time, measured_step
+from nnfmu.data.sampling import sample_time
 from nnfmu.data.tables import Table, format_of, read_table
 from nnfmu.errors import DataError
 from nnfmu.identifiers import to_c_identifier
@@ -131,38 +131,6 @@ def _stack(table: Table, cols: list[tuple[str, ...]], where: str) -> np.ndarray:
     return np.column_stack([table.columns[c] for c in flat])
 
 
-_TIMING = ("Ts", "time_column", "Ts_column", "fs_column")
-
-
-def _sample_time(reader: _Reader, files: dict, timing: dict) -> float:
-    """The files' sample time in s from exactly one of ``timing``'s keys (see :func:`load_files`)."""
-    given = [k for k in _TIMING if timing.get(k) is not None]
-    if len(given) != 1:
-        raise DataError("give the sample time one way: Ts (in s), a time column (time_column; CLI --time), or a "
-                        "column or variable holding Ts in s (Ts_column; CLI --Ts-column) or the rate in Hz "
-                        f"(fs_column; CLI --fs-column); got {' and '.join(given) if given else 'none'}")
-    (kind,) = given
-    if kind == "Ts":
-        Ts = float(timing["Ts"])
-        if not (np.isfinite(Ts) and Ts > 0):
-            raise DataError(f"the sample time Ts (CLI --Ts) must be a positive number of seconds, "
-                            f"got {timing['Ts']!r}")
-        return Ts
-    per_file = {}
-    for path in dict.fromkeys(p for group in files.values() for p in group):
-        table = reader.table(path)
-        if kind == "time_column":
-            (col,) = table.resolve(timing[kind])
-            per_file[str(path)] = measured_step(table.columns[col], f"{path}: the time column {col!r}")
-            continue
-        value = table.setting(timing[kind])
-        if not (np.isfinite(value) and value > 0):
-            raise DataError(f"{path}: {timing[kind]!r} holds {value:g}; a sample "
-                            f"{'time' if kind == 'Ts_column' else 'rate'} must be positive")
-        per_file[str(path)] = value if kind == "Ts_column" else 1.0 / value
-    return common_sample_time(per_file, [str(p) for p in files["train"]], "give Ts to force one")
-
-
 def load_files(
     files,
     *,
@@ -232,8 +200,9 @@ def load_files(
     input_entries = entries(inputs, "inputs")
     base, n_in = input_entries + entries(outputs, "outputs"), len(input_entries)
     reader = _Reader(None if fmt is None else format_of(Path(), fmt))
-    Ts_files = _sample_time(reader, file_lists, {"Ts": Ts, "time_column": time_column, "Ts_column": Ts_column,
-                                                 "fs_column": fs_column})
+    notes: list = []
+    Ts_files = sample_time(reader, file_lists, {"Ts": Ts, "time_column": time_column, "Ts_column": Ts_column,
+                                                 "fs_column": fs_column}, notes)
     first = file_lists["train"][0]
     names = _names(reader.table(first), base, reader.columns(first, base), n_in)
     seen: dict = {}
@@ -241,6 +210,8 @@ def load_files(
                                _override(base, columns[split], split) if split in columns else base,
                                names, resample, seen) for split in splits}
     source = _source(file_lists, columns, splits, reader, base, resample, Ts_files)
+    if notes:
+        source["notes"] = notes
     Ts = Ts_files if resample == 1 else float(f"{Ts_files * resample:.15g}")  # 3 x 0.1: 0.3, not 0.30000000000000004
     ds = Dataset(Ts=Ts, inputs=tuple(names[0]), outputs=tuple(names[1]), splits=data,
                  source=source).with_units(units)

@@ -21,8 +21,8 @@ from __future__ import annotations
 import errno
 import json
 import os
+import secrets
 import shutil
-import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -37,11 +37,13 @@ from nnfmu.errors import DataError, DataFileError, ShapeError
 def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write ``ds`` as a dataset folder at ``path`` and return the path.
 
-    An existing folder is replaced only with ``overwrite=True``; the old one
-    stays intact until the new one is complete. A dataset without a ``test``
-    split is refused (:class:`DataError`): every model is scored on it.
+    An existing folder is replaced only with ``overwrite=True``, and only if it
+    is a dataset folder (:func:`check_replaceable`); the old one stays intact
+    until the new one is complete. A symbolic link is written through to its
+    folder. A dataset without a ``test`` split is refused (:class:`DataError`):
+    every model is scored on it.
     """
-    path = Path(path)
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
     if "test" not in ds.splits:
         raise DataError(f"the dataset has no 'test' split (it has {', '.join(ds.splits)}), so nothing could be "
                         f"scored on {path}; add held-out test data: from_arrays(u_test=..., y_test=...), "
@@ -51,11 +53,12 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
         raise DataFileError(
             f"{path} already exists; choose another folder or pass overwrite=True (CLI: --force)"
         )
+    check_replaceable(path)
     parent = path.resolve().parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temp_dirs(path)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
+        tmp = _make_temp_dir(parent / f".{path.name}.{os.getpid()}")
     except OSError as exc:
         raise _write_error(exc, path) from exc
     try:
@@ -71,12 +74,58 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
     return path
 
 
+#: What a dataset folder holds; replacing a folder that holds anything else would lose it.
+DATASET_FILES = frozenset({"meta.json", *(f"{name}.npz" for name in SPLIT_NAMES)})
+
+
+def check_replaceable(path: str | os.PathLike) -> None:
+    """Raise :class:`DataFileError` unless ``path`` is absent, an empty folder or a dataset folder.
+
+    A dataset folder holds ``meta.json`` and nothing but the files of :data:`DATASET_FILES`. Anything else
+    (a file, a folder of the user's own work) is named in the message and never replaced, even with
+    ``--force``.
+    """
+    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
+    if not path.exists():
+        return
+    if not path.is_dir():
+        raise DataFileError(f"{path} is a file, not a dataset folder; nnfmu replaces only a dataset folder it "
+                            "wrote: choose another folder")
+    try:
+        entries = sorted(path.iterdir())
+    except OSError as exc:
+        raise _write_error(exc, path) from exc
+    foreign = [e.name for e in entries if e.name not in DATASET_FILES or not e.is_file() or e.is_symlink()]
+    if foreign:
+        more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        what = f"it holds {', '.join(map(repr, foreign[:3]))}{more}, which nnfmu did not write"
+    elif entries and not (path / "meta.json").is_file():
+        what = "it has no meta.json"
+    else:
+        return
+    raise DataFileError(f"{path} is not a dataset folder: {what}; --force replaces only a dataset folder: move "
+                        "those files away or choose another folder")
+
+
+def _make_temp_dir(stem: Path) -> Path:
+    """A new folder ``<stem>.<random>.tmp``, with the usual permissions (``0777`` less the umask), as any folder the
+    user makes: :func:`tempfile.mkdtemp` makes it ``0700``, and the dataset folder would keep that."""
+    for _ in range(100):
+        tmp = stem.with_name(f"{stem.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            tmp.mkdir()
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary folder name", str(stem))
+
+
 def _write_error(exc: OSError, path: Path) -> DataFileError:
     """One line: the folder, the cause, what to do (a full disk: free space or write elsewhere)."""
     if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)):
         return DataFileError(f"no space left on device at {path}; free space or choose another folder "
                              "(CLI: another -o)")
-    return DataFileError(f"cannot write the dataset folder {describe_os_error(exc, path)}")
+    return DataFileError(f"cannot write the dataset folder {describe_os_error(exc, path, doing='write')}")
 
 
 def remove_stale_temp_dirs(path: Path) -> list[Path]:

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from nnfmu import __version__
 from nnfmu.errors import FmuBuildError
 from nnfmu.identifiers import is_c_identifier
+from nnfmu.limits import MAX_MODEL_NAME
 from nnfmu.system import SystemSpec, Variable
 from nnfmu.window_names import past_element, past_name
 
@@ -143,6 +144,9 @@ def check_spec(spec: SystemSpec) -> None:
         raise FmuBuildError(
             f"the model name {spec.name!r} becomes the FMU's modelIdentifier and must be an ASCII C "
             f"identifier; rename it (letters a-z, A-Z, digits, '_')")
+    if len(spec.name) > MAX_MODEL_NAME:
+        raise FmuBuildError(f"the model name has {len(spec.name)} characters, above nnfmu's limit of {MAX_MODEL_NAME} "
+                            "(nnfmu.limits.MAX_MODEL_NAME): it names the FMU's files; choose a shorter name")
     for v in spec.inputs + spec.outputs + spec.parameters:
         if not math.isfinite(v.start):
             raise FmuBuildError(f"the start value of {v.name!r} is {v.start!r}; give it a finite start value")

@@ -12,7 +12,7 @@ import math
 import os
 from pathlib import Path
 
-from nnfmu.atomic import write_text_atomic
+from nnfmu.atomic import describe_os_error, write_text_atomic
 from nnfmu.errors import CheckpointError, DataFileError
 from nnfmu.physics.base import PhysicsSystem
 from nnfmu.physics.document import system_from_document, system_to_document
@@ -49,7 +49,7 @@ def load_fit(path: str | os.PathLike) -> tuple[PhysicsSystem, dict]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise DataFileError(f"cannot read the grey-box fit {path}: {exc.strerror or exc}; check the path") from exc
+        raise DataFileError(f"cannot read the grey-box fit {describe_os_error(exc, path, doing='read')}") from exc
     try:
         doc = json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

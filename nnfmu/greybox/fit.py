@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -181,8 +182,10 @@ def _run_starts(system, problem, windows, unknowns, config, progress):
                 continue
             report = lambda n, cost, best_cost: bar.set_postfix(evaluations=n, cost=f"{cost:.4g}",  # noqa: E731
                                                                 best=f"{best_cost:.4g}")
-            outcome = solve(problem, z0, lower, upper, solver=config.solver,
-                            max_evaluations=config.max_evaluations, report=report)
+            with warnings.catch_warnings(), np.errstate(all="ignore"):  # SciPy's overflows inside a step it rejects
+                warnings.simplefilter("ignore", RuntimeWarning)
+                outcome = solve(problem, z0, lower, upper, solver=config.solver,
+                                max_evaluations=config.max_evaluations, report=report)
             runs.append({"start": dict(zip(unknowns.names, map(float, theta))), "cost": outcome.cost,
                          "evaluations": outcome.evaluations, "seconds": round(outcome.seconds, 3),
                          "status": outcome.status, "notes": outcome.notes,

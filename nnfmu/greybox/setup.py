@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nnfmu.data.sampling import AGREE_RTOL
 from nnfmu.errors import ConfigError, DataError
 from nnfmu.physics.base import PhysicsSystem
 
@@ -34,6 +35,10 @@ def _names(what: str, given, known: list[str]) -> list[str]:
         raise ConfigError(f"{what} {', '.join(unknown)}: no such parameter; the model's parameters are "
                           f"{', '.join(known)}")
     return list(given)
+
+
+#: The largest finite bound a fit accepts: the solver squares scaled steps and bounds, and 1e308 overflows.
+MAX_BOUND = 1e150
 
 
 def choose_unknowns(system: PhysicsSystem, *, free=None, fixed=(), bounds=None, start=None) -> Unknowns:
@@ -64,6 +69,10 @@ def choose_unknowns(system: PhysicsSystem, *, free=None, fixed=(), bounds=None, 
             raise ConfigError(f"the start of parameter {v.name} is {s}; give a finite value (--start {v.name}=...)")
         if lo > hi:
             raise ConfigError(f"the bounds of {v.name} are [{lo:g}, {hi:g}], lower above upper; swap them")
+        if max((abs(b) for b in (lo, hi) if np.isfinite(b)), default=0.0) > MAX_BOUND:
+            raise ConfigError(f"the bounds of {v.name} [{lo:g}, {hi:g}] {v.unit} are beyond {MAX_BOUND:g}, where the "
+                              f"solver's squares overflow; give bounds within +-{MAX_BOUND:g}, or leave a side empty "
+                              f"for no bound (--bounds {v.name}=LO:)")
         if not lo <= s <= hi:
             raise ConfigError(f"the bounds of {v.name} [{lo:g}, {hi:g}] {v.unit} exclude its start {s:g}; widen "
                               f"--bounds {v.name}=LO:HI or give a start inside (--start {v.name}=VALUE)")
@@ -82,7 +91,7 @@ def check_dataset(system: PhysicsSystem, dataset) -> None:
             show = lambda pairs: ", ".join(f"{n} [{u}]" for n, u in pairs)  # noqa: E731
             raise DataError(f"the dataset's {what} ({show(got)}) are not the model's ({show(want)}); import the "
                             f"data with the model's names and units (nnfmu import --inputs/--outputs/--units)")
-    if not np.isclose(dataset.Ts, system.Ts, rtol=1e-9, atol=0.0):
+    if not np.isclose(dataset.Ts, system.Ts, rtol=AGREE_RTOL, atol=0.0):  # as records agree with each other
         raise DataError(f"the dataset's sample time is {dataset.Ts:g} s but the model {system.name!r} steps at "
                         f"{system.Ts:g} s; resample the data (nnfmu import --resample) or set the model's Ts")
 

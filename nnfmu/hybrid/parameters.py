@@ -21,6 +21,7 @@ from typing import Mapping
 import casadi as ca
 import torch
 
+from nnfmu.atomic import describe_os_error
 from nnfmu.errors import CheckpointError, ConfigError, DataFileError, UnknownOptionError
 from nnfmu.physics import PhysicsSystem
 from nnfmu.physics.document import system_from_document
@@ -162,8 +163,11 @@ def load_physics_params(path: str | os.PathLike) -> dict:
     except FileNotFoundError:
         raise DataFileError(f"physics parameter file {path} not found; pass a JSON file such as "
                             '{"k_s": 32500.0, "C_max": 4.2e-10}') from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataFileError(f"cannot read the physics parameter file {path}: {exc}") from exc
+    except OSError as exc:
+        raise DataFileError(f"cannot read the physics parameter file {describe_os_error(exc, path, doing='read')}"
+                            ) from exc
+    except UnicodeDecodeError as exc:
+        raise DataFileError(f"cannot read the physics parameter file {path}: {exc}; save it as UTF-8 JSON") from exc
     except json.JSONDecodeError as exc:
         raise ConfigError(f"physics parameter file {path} is not valid JSON ({exc}); write an object such as "
                           '{"k_s": 32500.0, "C_max": 4.2e-10}') from exc

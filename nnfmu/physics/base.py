@@ -18,13 +18,16 @@ constants.
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 
-from nnfmu.errors import ShapeError
+from nnfmu.errors import ConfigError, ShapeError
+from nnfmu.identifiers import to_c_identifier
+from nnfmu.limits import MAX_MODEL_NAME, MAX_RK4_SUBSTEPS
 from nnfmu.physics.rk4 import rk4_function
 from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 
@@ -91,6 +94,25 @@ def params_to_json(params) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(params).items()}
 
 
+#: A model's name: it prefixes the CasADi functions (``<name>_ode``) and names the FMU and its C symbols, so it
+#: starts with a letter and holds ASCII letters, digits and single underscores between them (CasADi's rule).
+MODEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*(?:_[A-Za-z0-9]+)*")
+
+
+def check_model_header(name, n_sub) -> None:
+    """A model's name follows :data:`MODEL_NAME`, and ``n_sub`` is from 1 to ``nnfmu.limits.MAX_RK4_SUBSTEPS``."""
+    if isinstance(name, str) and len(name) > MAX_MODEL_NAME:
+        raise ConfigError(f"model name {name[:20]}... has {len(name)} characters, above nnfmu's limit of "
+                          f"{MAX_MODEL_NAME} (nnfmu.limits.MAX_MODEL_NAME): it names the FMU's files; shorten it")
+    if not isinstance(name, str) or not MODEL_NAME.fullmatch(name):
+        fix = re.sub(r"_+", "_", to_c_identifier(str(name)))
+        raise ConfigError(f"model name {name!r} is not valid: it names the FMU and its C functions, so it starts with "
+                          f"a letter and holds only ASCII letters, digits and single underscores; e.g. {fix!r}")
+    if isinstance(n_sub, bool) or not isinstance(n_sub, int) or not 1 <= n_sub <= MAX_RK4_SUBSTEPS:
+        raise ConfigError(f"{name}: n_sub must be a whole number from 1 to {MAX_RK4_SUBSTEPS:,} (nnfmu.limits."
+                          f"MAX_RK4_SUBSTEPS), got {n_sub!r}; give the RK4 sub-steps per sample in that range")
+
+
 def _check_ports(fn: ca.Function, ins: list[str], outs: list[str], what: str) -> None:
     if fn.name_in() != ins or fn.name_out() != outs:
         raise ShapeError(f"{what} has ports {fn.name_in()} -> {fn.name_out()}, expected {ins} -> {outs}")
@@ -143,6 +165,7 @@ class PhysicsSystem:
     free_parameters: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        check_model_header(self.name, self.n_sub)
         _check_ports(self.ode, ["x", "u", "p"], ["xdot"], f"{self.name} ode")
         _check_ports(self.output, ["x", "p"], ["y"], f"{self.name} output")
         _check_ports(self.init_state, ["y0", "u0", "p"], ["x0"], f"{self.name} init_state")

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from nnfmu.errors import ConfigError, ShapeError
-from nnfmu.physics.base import PhysicsSystem, parameter_variables
+from nnfmu.physics.base import PhysicsSystem, check_model_header, parameter_variables
 from nnfmu.system import Variable
 
 __all__ = ["ModelBuilder", "check_system"]
@@ -62,8 +62,7 @@ class ModelBuilder:
                  settle_time: float | None = None, source: dict | None = None) -> None:
         if not (isinstance(Ts, (int, float)) and np.isfinite(Ts) and Ts > 0):
             raise ConfigError(f"{name}: Ts must be a positive number of seconds, got {Ts!r}")
-        if isinstance(n_sub, bool) or not isinstance(n_sub, int) or n_sub < 1:
-            raise ConfigError(f"{name}: n_sub must be a whole number >= 1, got {n_sub!r}")
+        check_model_header(name, n_sub)  # before a CasADi function is named after it, or RK4 unrolled n_sub times
         if settle_time is not None and not (np.isfinite(settle_time) and settle_time > 0):
             raise ConfigError(f"{name}: settle_time must be a positive number of seconds, got {settle_time!r}")
         self.name, self.Ts, self.n_sub, self.description = name, float(Ts), n_sub, description
@@ -94,11 +93,18 @@ class ModelBuilder:
         return sym
 
     def input(self, name: str, unit: str = "", description: str = "", *, min: float | None = None,
-              max: float | None = None, start: float = 0.0) -> ca.SX:
-        """An input with its valid range ``[min, max]`` (the FMU declares it; ``generate`` excites within it)."""
+              max: float | None = None, start: float | None = None) -> ca.SX:
+        """An input with its valid range ``[min, max]`` (the FMU declares it; ``generate`` excites within it).
+
+        ``start``: the FMU's value before an importer sets one; default 0, or the range's middle (its one bound)
+        where the range excludes 0. A start outside the range is refused.
+        """
         self._new("input", name)
         sym = ca.SX.sym(name)
-        self._inputs.append((Variable(name, unit, description, float(start), min, max), sym))
+        variable = Variable(name, unit, description, _default_start(min, max) if start is None else float(start),
+                            min, max)
+        _check_bounds(self.name, variable, "input", "start value", "start= to a value inside them")
+        self._inputs.append((variable, sym))
         return sym
 
     def parameter(self, name: str, nominal: float, unit: str = "", description: str = "", *,
@@ -159,7 +165,7 @@ class ModelBuilder:
         if xdot is not None and by_state:
             raise ShapeError(f"{self.name}: give the ODE as one column or by state name, not both")
         if xdot is not None:
-            xdot = ca.SX(xdot)
+            xdot = self._as_sx(xdot, "the ODE", f"a column of {len(names)} derivatives, one per state")
             if xdot.shape != (len(names), 1):
                 raise ShapeError(f"{self.name}: the ODE gives {xdot.shape[0]}x{xdot.shape[1]} derivatives for "
                                  f"{len(names)} states ({', '.join(names)}); give one per state, in that order")
@@ -171,10 +177,21 @@ class ModelBuilder:
         if missing:
             raise ShapeError(f"{self.name}: the ODE has no derivative for {', '.join(missing)}; give one for every "
                              f"state ({', '.join(names)})")
+        by_state = {n: self._as_sx(e, f"the ODE's derivative of {n}", "one scalar expression per state")
+                    for n, e in by_state.items()}
         for n, e in by_state.items():
-            if ca.SX(e).shape != (1, 1):
-                raise ShapeError(f"{self.name}: the derivative of {n} is not a scalar")
-        self._xdot = {n: ca.SX(by_state[n]) for n in names}
+            if e.shape != (1, 1):
+                raise ShapeError(f"{self.name}: the ODE's derivative of {n} is {e.shape[0]}x{e.shape[1]}, expected "
+                                 f"1x1; give one scalar expression per state ({', '.join(names)})")
+        self._xdot = {n: by_state[n] for n in names}
+
+    def _as_sx(self, value, what: str, expected: str) -> ca.SX:
+        """``value`` as CasADi SX (a list or tuple stacked as a column); one line naming ``what`` if it is none."""
+        try:
+            return ca.vertcat(*value) if isinstance(value, (list, tuple)) else ca.SX(value)
+        except (NotImplementedError, TypeError, RuntimeError):  # CasADi lists every constructor's prototype
+            raise ShapeError(f"{self.name}: {what} is a {type(value).__name__}, not a CasADi expression or number; "
+                             f"give {expected}") from None
 
     def init(self, **by_state) -> None:
         """The initial-state rule: ``state=expr`` of the measured outputs, the first inputs and the parameters."""
@@ -232,11 +249,21 @@ class ModelBuilder:
         return values
 
 
-def _check_bounds(model: str, v: Variable) -> None:
+def _default_start(low: float | None, high: float | None) -> float:
+    """0 where the range holds it, else the range's middle, or its one bound."""
+    if (low is None or low <= 0) and (high is None or high >= 0):
+        return 0.0
+    if low is not None and high is not None:
+        return 0.5 * (low + high)
+    return float(low if low is not None else high)
+
+
+def _check_bounds(model: str, v: Variable, kind: str = "parameter", value: str = "nominal value",
+                  fix: str = "the nominal value") -> None:
     low, high = -np.inf if v.min is None else v.min, np.inf if v.max is None else v.max
     if not (np.isfinite(v.start) and low <= v.start <= high):
-        raise ConfigError(f"{model}: parameter {v.name!r} has nominal value {v.start:g} outside its bounds "
-                          f"[{low:g}, {high:g}]; widen the bounds or change the nominal value")
+        raise ConfigError(f"{model}: {kind} {v.name!r} has {value} {v.start:g} outside its bounds "
+                          f"[{low:g}, {high:g}]; widen the bounds or change {fix}")
 
 
 def _plausible(v: Variable) -> float:
@@ -252,6 +279,8 @@ def check_system(system: PhysicsSystem) -> None:
     """
     for v in system.parameters:
         _check_bounds(system.name, v)
+    for v in system.inputs:  # a JSON document's inputs too: the FMU refuses a start outside the range
+        _check_bounds(system.name, v, "input", "start value", "its start to a value inside them")
     u = np.array([_plausible(v) for v in system.inputs], dtype=float)
     y0 = np.array([_plausible(v) for v in system.outputs], dtype=float)
     p = system.parameter_values()

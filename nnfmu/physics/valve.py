@@ -102,16 +102,29 @@ def _sigmoid(x, eps):
 def _flow_function(r, P):
     """ISO 6358 flow function ``phi(r)`` of the pressure ratio ``r`` in [0, 1], with a laminar end."""
     phi_sub = ca.sqrt(ca.fmax(1.0 - ((r - P.b) / (1.0 - P.b)) ** 2, 0.0))
-    phi_lam_start = ca.sqrt(1.0 - ((P.beta_lam - P.b) / (1.0 - P.b)) ** 2)
-    phi_lam = phi_lam_start * (1.0 - r) / (1.0 - P.beta_lam)
+    phi_lam = _laminar_slope(P) * (1.0 - r)
     return ca.if_else(r <= P.b, 1.0, ca.if_else(r <= P.beta_lam, phi_sub, phi_lam))
 
 
+def _laminar_slope(P):
+    """``-dphi/dr`` of the laminar end: ``phi`` falls linearly from ``phi(beta_lam)`` to 0 at ratio 1."""
+    return ca.sqrt(1.0 - ((P.beta_lam - P.b) / (1.0 - P.b)) ** 2) / (1.0 - P.beta_lam)
+
+
 def _mass_flow(conductance, p_from, p_to, P):
-    """Mass flow in kg/s from ``p_from`` to ``p_to`` (negative when the pressures cross)."""
+    """Mass flow in kg/s from ``p_from`` to ``p_to`` (negative when the pressures cross).
+
+    Above the ratio ``beta_lam`` the laminar end ``p_hi * phi(r)`` is written as what it equals, the signed
+    pressure difference times a constant: through ``fmax``/``fmin`` and ``r = p_lo / p_hi``, AD lost the derivative
+    exactly at ratio 1 (both pressures equal: ``dr/dp`` is 0 at the tie), the state every ME run of the valve
+    starts from. The values are the same to rounding.
+    """
     p_hi, p_lo = ca.fmax(p_from, p_to), ca.fmin(p_from, p_to)
-    magnitude = conductance * P.rho0 * p_hi * ca.sqrt(P.T0 / P.T) * _flow_function(p_lo / p_hi, P)
-    return ca.if_else(p_from >= p_to, magnitude, -magnitude)
+    r = p_lo / p_hi
+    gain = conductance * P.rho0 * ca.sqrt(P.T0 / P.T)
+    magnitude = p_hi * _flow_function(r, P)
+    return gain * ca.if_else(r > P.beta_lam, _laminar_slope(P) * (p_from - p_to),
+                             ca.if_else(p_from >= p_to, magnitude, -magnitude))
 
 
 def _conductance(z, P):

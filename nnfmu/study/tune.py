@@ -165,10 +165,13 @@ def grid_points(grid: Mapping[str, Sequence]) -> list[dict]:
 
 
 def check_grid(arch: str, base: Hyper, grid: Mapping[str, Sequence], n_u: int, n_y: int) -> None:
-    """Build every grid point's configs now, so that a bad value fails before Ray starts."""
+    """Build every grid point's configs, the network's and the training's, now: a bad value (``lr=nan``) fails
+    before Ray starts, not in every trial."""
     for point in grid_points(grid):
         try:
-            base.replace(**point).model_config(arch, n_u, n_y)
+            hyper = base.replace(**point)
+            hyper.model_config(arch, n_u, n_y)
+            hyper.train_config(strategy=STRATEGIES[0], epochs=1, patience=0, seed=0, max_minutes=None)
         except NnfmuError as exc:
             raise ConfigError(f"tune grid point {point} is invalid for {arch}: {exc}") from exc
 

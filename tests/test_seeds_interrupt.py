@@ -1,0 +1,61 @@
+"""Ctrl-C in the first seconds of ``nnfmu train --seeds K``: one line, status 130, and the truth about what is kept."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from fmu_cases import oscillator_dataset
+
+import nnfmu.training
+from nnfmu.cli import main
+
+
+def test_a_seed_worker_stopped_before_its_training_began_ends_quietly_with_130(tmp_path):
+    fifo = tmp_path / "linear.json"
+    os.mkfifo(fifo)  # reading it blocks: the worker waits there, after its imports, until the signal comes
+    argv = [sys.executable, "-m", "nnfmu.training.seed_worker", str(tmp_path / "data"), "{}", "{}",
+            str(tmp_path / "seed-0.pt"), "cpu", "1", "1", str(fifo)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(1.0)  # past the interpreter's start, so that Python's own SIGINT handler is in place
+    proc.send_signal(signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err == "" and out == ""
+    assert not (tmp_path / "seed-0.pt").exists()
+
+
+@pytest.fixture
+def data(tmp_path):
+    return oscillator_dataset(tmp_path / "data")
+
+
+@pytest.mark.parametrize("written", [[], ["seed-0.pt"]])
+def test_an_interrupted_seeds_run_says_what_was_kept(data, tmp_path, capsys, monkeypatch, written):
+    out = tmp_path / "m.pt"
+    folder = tmp_path / "m.seeds"
+
+    def stopped(*args, **kwargs):  # Ctrl-C while the seeds' workers start
+        folder.mkdir()
+        for name in written:
+            (folder / name).write_bytes(b"a checkpoint")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(nnfmu.training, "train_seeds", stopped)
+    argv = ["train", "--data", str(data), "--arch", "gru", "--hidden", "4", "--epochs", "1", "--seeds", "2",
+            "--linear-path", "off", "--quiet", "-o", str(out)]
+    assert main(argv) == 130
+    captured = capsys.readouterr()
+    assert captured.err.strip() == "nnfmu train: interrupted"
+    if written:
+        assert "the checkpoints of seed-0.pt are kept in" in captured.out and (folder / "seed-0.pt").exists()
+    else:
+        assert "nothing was kept" in captured.out and not folder.exists()
+    assert not out.exists()
