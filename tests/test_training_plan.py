@@ -190,7 +190,8 @@ def test_train_cli_at_its_defaults_trains_a_seed_per_core_and_keeps_them_by_vali
     monkeypatch.setattr(resources, "usable_cores", lambda: 2)
     assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
     out = capsys.readouterr().out
-    assert "plan: seeds: 2 trained side by side" in out and "kept the selection of 2 seeds" in out
+    assert "plan: seeds: 2 trained side by side" in out
+    assert "kept the ensemble of 2 seeds:" in out or "alone (of 2 seeds):" in out  # what the checkpoint holds
     assert sorted(p.name for p in (tmp_path / "a.seeds").iterdir()) == ["seed-0.pt", "seed-1.pt"]
     summary = load_checkpoint(tmp_path / "a.pt")["summary"]
     assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1]
