@@ -72,12 +72,15 @@ def test_corrupt_file_is_a_checkpoint_error(saved, tmp_path):
         load_model(broken)
 
 
-@pytest.mark.parametrize("writer", ["text", "foreign_torch", "unsafe_pickle"])
+@pytest.mark.parametrize("writer", ["text", "random_bytes", "foreign_torch", "unsafe_pickle"])
 def test_a_file_of_another_kind_is_a_checkpoint_error(writer, tmp_path):
     path = tmp_path / "other.pt"
     if writer == "text":
         path.write_text("time,u,y\n0,1,2\n")
         match = "not a readable torch checkpoint"
+    elif writer == "random_bytes":  # no Python objects in it: not told that it could run code (issue 37)
+        path.write_bytes(np.random.default_rng(0).bytes(4096))
+        match = r"^(?!.*(run code|weights_only)).*not an nnfmu checkpoint \(corrupt, truncated or another file type\)"
     elif writer == "foreign_torch":
         torch.save({"model": torch.zeros(3)}, path)
         match = "torch file but not an nnfmu checkpoint"

@@ -124,15 +124,38 @@ def _unreadable(path: Path, exc: Exception) -> CheckpointError:
     """The error for a file torch cannot load with weights_only=True; never repeats torch's advice to
     load it with weights_only=False (that would run whatever code the file holds)."""
     text = str(exc)
-    if isinstance(exc, pickle.UnpicklingError) and "weights only load failed" in text.lower():
+    if isinstance(exc, pickle.UnpicklingError) and "weights only load failed" in text.lower() and \
+            _holds_globals(path):
         found = _UNSUPPORTED.search(text)
         return CheckpointError(
             f"{path} is not a plain nnfmu checkpoint: it holds Python objects"
             f"{f' ({found.group(1)})' if found else ''} that only unrestricted unpickling could load, which can "
             f"run code hidden in the file; nnfmu refuses it. Do not load it with weights_only=False; use a "
             f"checkpoint written by 'nnfmu train'")
+    if "weights only load failed" in text.lower():  # torch's text would advise weights_only=False: never repeat it
+        return CheckpointError(f"{path} is not an nnfmu checkpoint (corrupt, truncated or another file type); use a "
+                               "checkpoint written by 'nnfmu train'")
     return CheckpointError(f"{path} is not a readable torch checkpoint (corrupt, truncated or another file "
                            f"type): {type(exc).__name__}: {text.splitlines()[0] if text else ''}")
+
+
+def _holds_globals(path: Path) -> bool:
+    """Whether ``path`` is a pickle (plain, or torch's zip with its ``data.pkl``) that names Python objects to build:
+    only such a file earns the warning about code; random bytes or text are just not a checkpoint."""
+    import pickletools
+    import zipfile
+
+    try:
+        if zipfile.is_zipfile(path):
+            with zipfile.ZipFile(path) as archive:
+                names = [n for n in archive.namelist() if n.endswith("data.pkl")]
+                data = archive.read(names[0]) if names else b""
+        else:
+            data = path.read_bytes()
+        return any(op.name in ("GLOBAL", "STACK_GLOBAL", "INST", "OBJ", "REDUCE")
+                   for op, _, _ in pickletools.genops(data))
+    except Exception:  # not a pickle at all (an unknown opcode, truncated): no objects in it
+        return False
 
 
 def model_from_checkpoint(ckpt: Mapping, state_dict: Mapping | None = None, where: str = "checkpoint") -> StepModel:
