@@ -26,7 +26,7 @@ import torch
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_layers as nets
-from nnfmu.export.ensemble import ensemble_to_casadi, with_y
+from nnfmu.export.ensemble import ensemble_to_casadi, inlined, with_y
 from nnfmu.export.init_window import init_function, relative_taps
 from nnfmu.identifiers import to_c_identifier
 from nnfmu.models import EnsembleStepModel, StepModel, architectures, tcn_state
@@ -161,10 +161,10 @@ def _linear_path_to_casadi(model: LinearPathStepModel) -> tuple[ca.Function, ca.
     u_mean, u_std, y_mean, y_std = (nets.dm(b_) for b_ in (model.u_mean, model.u_std, model.y_mean, model.y_std))
     ins = [ca.MX.sym(net_init.name_in(i), net_init.sparsity_in(i)) for i in range(net_init.n_in())]
     yn0, un0 = (ins[0] - y_mean) / y_std, (ins[1] - u_mean) / u_std
-    x0 = ca.vertcat(net_init(*ins), ca.mtimes(Ky, yn0) + ca.mtimes(Ku, un0) + k0)
+    x0 = ca.vertcat(inlined(net_init, ins)[0], ca.mtimes(Ky, yn0) + ca.mtimes(Ku, un0) + k0)
     init = ca.Function("init", ins, [x0], net_init.name_in(), ["x0"])
     x, u = ca.MX.sym("x", model.n_x), ca.MX.sym("u", c.n_u)
-    h_next, y_net = net_step(x[:m], u)
+    h_next, y_net = inlined(net_step, [x[:m], u])
     n = (y_net - y_mean) / y_std  # the network's raw output (its step de-normalises it)
     z_next = ca.mtimes(A, x[m:]) + ca.mtimes(B, (u - u_mean) / u_std) + b + ca.mtimes(G, n)
     yn = ca.mtimes(C, z_next) + d + alpha * n

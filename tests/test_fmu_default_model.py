@@ -1,0 +1,51 @@
+"""The default training's FMU (networks on a linear path, an ensemble of them) steps in one vectorised C function.
+
+Issue 36: the network of a linear-path member and the members of an ensemble were separate CasADi Functions, so the
+generated C called them from the step; only the step itself was cloned for AVX2/AVX-512 (``NNFMU_CLONES``), and the
+networks ran in portable SSE2 code, 6x (one member) and 12x (two members) slower than the same network alone.
+"""
+
+from __future__ import annotations
+
+import re
+import zipfile
+
+import pytest
+import torch
+
+from nnfmu.cosim import FmuSimulator
+from nnfmu.export import build_fmu, casadi_model
+from nnfmu.export.fmu import BuildOptions
+from nnfmu.models import EnsembleStepModel
+from tests.test_ensemble_mixed import corrected
+from tests.test_linear_path import data, linear, rel  # noqa: F401 (fixtures)
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+_FUNCTION = re.compile(r"^static int (casadi_f\d+)\((.*?^})\n", re.S | re.M)  # a model function: name, body
+
+
+@pytest.mark.parametrize("kind", ["member", "ensemble", "mixed"])
+def test_the_default_fmu_steps_in_one_function_and_equals_torch_and_the_exact_build(kind, data, linear,  # noqa: F811
+                                                                                     tmp_path):
+    gru = [corrected("gru", data, linear, [0.3, -0.2]), corrected("gru", data, linear, [-0.1, 0.2], g=-0.03)]
+    with torch.no_grad():
+        gru[1].net.readout.weight.mul_(-0.5)  # two members that differ
+    model = {"member": gru[0], "ensemble": EnsembleStepModel.from_members(gru),
+             "mixed": EnsembleStepModel.from_members([gru[0], corrected("lstm", data, linear, [0.1, 0.1])])}[kind]
+    cmodel = casadi_model(model, name=kind)
+    u, y = data.test.u[0], data.test.y[0]
+    want = model.simulate(u, y[0])
+    got = {}
+    for build, options in {"exact": BuildOptions(profile="exact"), "fast": BuildOptions()}.items():
+        fmu = build_fmu(cmodel, tmp_path / f"{build}.fmu", options=options)
+        with zipfile.ZipFile(fmu) as z:
+            source = z.read("sources/model_casadi.c").decode()
+        (step,) = re.findall(r"^NNFMU_CLONES\nstatic int (casadi_f\d+)\(", source, re.M)  # the one cloned function
+        body = dict(_FUNCTION.findall(source))[step]
+        assert not re.search(r"\bcasadi_f\d+\(", body), f"the step {step} calls another model function"
+        with FmuSimulator(fmu, data.input_names, data.output_names, data.Ts) as sim:
+            got[build] = sim.simulate(u, y[0])
+        assert rel(got[build], want) < 1e-9
+    assert rel(got["fast"], got["exact"]) < 1e-12
+
