@@ -15,6 +15,7 @@ import torch
 
 from nnfmu.cosim import FmuSimulator
 from nnfmu.export import build_fmu, casadi_model
+from nnfmu.export.codegen import MODEL_BODY
 from nnfmu.export.fmu import BuildOptions
 from nnfmu.models import EnsembleStepModel
 from tests.test_ensemble_mixed import corrected
@@ -22,7 +23,6 @@ from tests.test_linear_path import data, linear, rel  # noqa: F401 (fixtures)
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
-_FUNCTION = re.compile(r"^static int (casadi_f\d+)\((.*?^})\n", re.S | re.M)  # a model function: name, body
 
 
 @pytest.mark.parametrize("kind", ["member", "ensemble", "mixed"])
@@ -42,10 +42,29 @@ def test_the_default_fmu_steps_in_one_function_and_equals_torch_and_the_exact_bu
         with zipfile.ZipFile(fmu) as z:
             source = z.read("sources/model_casadi.c").decode()
         (step,) = re.findall(r"^NNFMU_CLONES\nstatic int (casadi_f\d+)\(", source, re.M)  # the one cloned function
-        body = dict(_FUNCTION.findall(source))[step]
+        body = dict(MODEL_BODY.findall(source))[step]
         assert not re.search(r"\bcasadi_f\d+\(", body), f"the step {step} calls another model function"
         with FmuSimulator(fmu, data.input_names, data.output_names, data.Ts) as sim:
             got[build] = sim.simulate(u, y[0])
         assert rel(got[build], want) < 1e-9
     assert rel(got["fast"], got["exact"]) < 1e-12
 
+
+
+def test_every_function_the_step_calls_is_cloned_with_it(tmp_path):
+    """A hybrid's network is a Function called in every RK4 stage: it must run in the step's instruction set."""
+    from nnfmu.export.codegen import STEP_ENTRY, called_from
+    from nnfmu.hybrid import HybridConfig
+    from nnfmu.models import build_model
+
+    torch.manual_seed(0)
+    hybrid = build_model(HybridConfig(n_u=2, n_y=2, physics="valve", hidden=8)).double().eval()
+    with torch.no_grad():
+        for prm in hybrid.correction.parameters():
+            prm.normal_(0, 0.1)
+    fmu = build_fmu(casadi_model(hybrid), tmp_path / "h.fmu")
+    with zipfile.ZipFile(fmu) as z:
+        source = z.read("sources/model_casadi.c").decode()
+    stepped = called_from(source, STEP_ENTRY.search(source).group(1))
+    assert len(stepped) >= 3  # the step, the network, the physics
+    assert set(re.findall(r"^NNFMU_CLONES\nstatic int (casadi_f\d+)\(", source, re.M)) == stepped

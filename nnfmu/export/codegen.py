@@ -129,7 +129,7 @@ void casadi_mtimes_dense(const casadi_real* NNFMU_RESTRICT x, casadi_int nrow_x,
 
 _DENSE_HELPER = re.compile(r"^void casadi_mtimes_dense\(.*?^}\n", re.S | re.M)
 _MODEL_FUNCTION = re.compile(r"^static int (casadi_f\d+)\(", re.M)
-_STEP_ENTRY = re.compile(r"_(?:entry|f32)_step\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
+STEP_ENTRY = re.compile(r"_(?:entry|f32)_step\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
                          r"casadi_real\* w, int mem\)\s*\{\s*return (casadi_f\d+)\(")
 _MUTABLE_STATIC = re.compile(r"^\s*static\s+(?!const\b)[^(\n]*[;=]", re.M)
 _INCLUDE = re.compile(r"^#include .*\n", re.M)
@@ -202,13 +202,34 @@ def patch_source(source: str, *, speed_patch: bool = True, profile: str = "fast"
                       "correct but its step is not vectorised (expected CasADi 3.8.x)", stacklevel=3)
     if fast:
         source = panels.use_fast_math(panels.panelize(source, precision))
-    step = _STEP_ENTRY.search(source)  # clone the step only: init runs once, and each clone costs compile time
+    step = STEP_ENTRY.search(source)  # clone the step only: init runs once, and each clone costs compile time
+    stepped = called_from(source, step.group(1)) if step else None
 
     def clone(match: re.Match) -> str:
-        cloned = step is None or match.group(1) == step.group(1)
+        cloned = stepped is None or match.group(1) in stepped
         return f"{'NNFMU_CLONES' + chr(10) if cloned else ''}static int {match.group(1)}("
 
     return _MODEL_FUNCTION.sub(clone, source)
+
+
+MODEL_BODY = re.compile(r"^static int (casadi_f\d+)\((.*?^})\n", re.S | re.M)  # a model function: name, body
+CALL = re.compile(r"\b(casadi_f\d+)\(arg")  # a call of a model function in a body
+
+
+def called_from(source: str, name: str) -> set[str]:
+    """``name`` and every model function (``casadi_fN``) of ``source`` that it calls, directly or not.
+
+    The step's callees run in the step's instruction set only if they are cloned too: a hybrid's network
+    (a Function called in each RK4 stage) ran in portable SSE2 code when only the step was (issue 36).
+    """
+    bodies = dict(MODEL_BODY.findall(source))
+    todo, seen = [name], set()
+    while todo:
+        current = todo.pop()
+        if current not in seen and current in bodies:
+            seen.add(current)
+            todo += CALL.findall(bodies[current])
+    return seen
 
 
 def generate_c(model: CasadiModel, directory: Path, prefix: str, *, speed_patch: bool = True,
