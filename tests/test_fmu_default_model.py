@@ -51,6 +51,26 @@ def test_the_default_fmu_steps_in_one_function_and_equals_torch_and_the_exact_bu
 
 
 
+def test_nnfmu_info_gives_the_step_cost_of_an_fmu_and_of_its_checkpoint(data, linear, tmp_path):  # noqa: F811
+    from nnfmu.cli.info import describe, render
+    from nnfmu.models import save_checkpoint
+
+    members = [corrected("gru", data, linear, [0.3, -0.2]), corrected("gru", data, linear, [-0.1, 0.2])]
+    model = EnsembleStepModel.from_members(members)
+    h, n_y, n_u, n_z = 8, data.n_y, data.n_u, linear.n_x
+    # per member: the GRU's three gates and readout; the path's A z, B u, G n and C z
+    weights = 2 * (3 * h * (h + n_y + n_u) + n_y * h + n_z * (n_z + n_u + n_y) + n_y * n_z)
+    want = {"weights": weights, "weight_bytes": 8 * weights, "flops": 2 * weights, "precision": "float64"}
+    save_checkpoint(tmp_path / "m.pt", model)
+    assert describe(tmp_path / "m.pt")["step_cost"] == want
+    for options, real in ((BuildOptions(profile="exact"), 8), (BuildOptions(), 8),
+                          (BuildOptions(precision="float32"), 4)):
+        fmu = build_fmu(casadi_model(model), tmp_path / "m.fmu", options=options)
+        assert describe(fmu)["step_cost"] == dict(want, weight_bytes=real * weights,
+                                                  precision="float32" if real == 4 else "float64")
+    assert f"step cost: {weights} weights read per step" in render(describe(fmu))
+
+
 def test_every_function_the_step_calls_is_cloned_with_it(tmp_path):
     """A hybrid's network is a Function called in every RK4 stage: it must run in the step's instruction set."""
     from nnfmu.export.codegen import STEP_ENTRY, called_from

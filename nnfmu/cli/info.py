@@ -103,7 +103,38 @@ def _fmu(path: Path) -> dict:
             "platforms": fmpy.supported_platforms(str(path)), "Ts": None if step is None else float(step),
             "inputs": by["input"], "outputs": by["output"], "parameters": by["parameter"],
             "description": md.description, "generation_tool": md.generationTool,
-            "generated": md.generationDateAndTime}
+            "generated": md.generationDateAndTime, "step_cost": _fmu_step_cost(path)}
+
+
+def _fmu_step_cost(path: Path) -> dict | None:
+    """The step's weights, bytes and FLOPs from the C the FMU ships (None for an FMU without nnfmu's sources)."""
+    import zipfile
+
+    from nnfmu.errors import FmuBuildError
+    from nnfmu.export.step_cost import source_cost
+
+    with zipfile.ZipFile(path) as z:
+        if "sources/model_casadi.c" not in z.namelist():
+            return None
+        source = z.read("sources/model_casadi.c").decode("utf-8", errors="replace")
+    try:
+        return source_cost(source).as_dict()
+    except FmuBuildError:
+        return None
+
+
+def _checkpoint_step_cost(path: Path) -> dict | str:
+    """The float64 FMU step's weights, bytes and FLOPs, from the model's CasADi step (as ``nnfmu export`` builds it)."""
+    from nnfmu.errors import ExportError
+    from nnfmu.export import to_casadi
+    from nnfmu.export.step_cost import function_cost
+    from nnfmu.models import load_model
+
+    try:
+        _, step = to_casadi(load_model(path).double(), verify=False)
+    except ExportError as exc:
+        return f"not exportable: {exc}"
+    return function_cost(step).as_dict()
 
 
 def _is_number(value) -> bool:
@@ -136,7 +167,7 @@ def _checkpoint(path: Path) -> dict:
     return {"kind": "checkpoint", "path": str(path), "name": meta.get("name"), "Ts": meta.get("Ts"),
             "model_config": config, "train_config": ckpt.get("train_config"),
             "inputs": stats("u", meta.get("inputs", [])), "outputs": stats("y", meta.get("outputs", [])),
-            "training": summary, "source": meta.get("source", {})}
+            "training": summary, "source": meta.get("source", {}), "step_cost": _checkpoint_step_cost(path)}
 
 
 _TITLES = {"init_window": "init window", "model_config": "network", "train_config": "training settings",
@@ -164,6 +195,8 @@ def render(doc: dict) -> str:
         lines.append("  splits:")
         lines += [f"    {name}: {s['n_traj']} trajectories, {s['n_samples']} samples (lengths "
                   f"{', '.join(map(str, s['lengths']))})" for name, s in doc["splits"].items()]
+    if doc.get("step_cost"):
+        lines.append(f"  step cost: {_cost(doc['step_cost'])}")
     for key in ("init_window", "model_config", "train_config", "training", "source"):
         value = doc.get(key)
         if value in (None, {}, []):
@@ -176,6 +209,14 @@ def render(doc: dict) -> str:
         lines += textwrap.wrap(", ".join(pairs), 110, initial_indent="    ", subsequent_indent="    ",
                                break_on_hyphens=False)
     return "\n".join(lines)
+
+
+def _cost(cost: dict | str) -> str:
+    """``3302 weights read per step (26.4 kB in float64), 6604 FLOPs in matrix products``."""
+    if isinstance(cost, str):
+        return cost
+    return (f"{cost['weights']} weights read per step ({cost['weight_bytes'] / 1000:.1f} kB in {cost['precision']}), "
+            f"{cost['flops']} FLOPs in matrix products (docs/fmu-speed.md)")
 
 
 def _channel(c: dict) -> str:
