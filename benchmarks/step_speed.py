@@ -4,7 +4,13 @@ Builds FMUs of networks with random (seeded) weights, 2 inputs and 2 outputs,
 in three builds each: ``exact`` (the same bits as CasADi), ``fast`` (the
 default: FMA, vectorised exp/tanh, weights in row panels) and ``fast f32``
 (``--precision float32``). Cases: the GRU at hidden 16-256, the other
-architectures at their defaults (hidden 32) and the TCN at width 64.
+architectures at their defaults (hidden 32) and the TCN at width 64; and what
+the defaults give users (:func:`user_cases`, issue 36; ``--no-users`` leaves
+them out): a default training's FMU (two GRU-32 on a linear path) with 1 and 3
+outputs beside one of its members and the plain GRU-32 of the same ports, a
+search's mixed ensemble, an init-window FMU and a hybrid. Every case is printed
+against its weight-read bound, and the issue-36 targets (a member within 1.2x of
+the plain network, two members within 2.2x of one) with the figures of the run.
 Measured, all in process CPU time on one pinned core (``taskset``), in
 ``--rounds`` rounds that interleave every case (the median is printed):
 
@@ -46,9 +52,10 @@ import numpy as np
 import torch
 
 from nnfmu.export import casadi_model
+from nnfmu.export.step_cost import function_cost
 from nnfmu.export.compiler import PROFILE_FLAGS, run_compiler
 from nnfmu.export.fmu import BuildOptions, build_fmu, fmi_header_dir, platform_folder
-from nnfmu.models import ModelConfig, build_model, save_checkpoint
+from nnfmu.models import EnsembleStepModel, ModelConfig, build_model, save_checkpoint
 
 HERE = Path(__file__).parent
 META = {"name": "bench", "Ts": 0.01, "inputs": [{"name": "u1", "unit": ""}, {"name": "u2", "unit": ""}],
@@ -64,8 +71,53 @@ def make_network(arch: str, hidden: int, seed: int = 0):
 
 
 def n_weights(network) -> int:
-    """Weights used once per step: every matrix (and Conv1d kernel) of the network."""
-    return sum(p.numel() for p in network.parameters() if p.dim() >= 2)
+    """Weights the step's matrix products read: every matrix (and Conv1d kernel), those of an ensemble's every member
+    and of a linear path; a hybrid's network counts once per RK4 stage (:mod:`nnfmu.export.step_cost`)."""
+    return function_cost(casadi_model(network).step).weights
+
+
+def ports(n_u: int, n_y: int, name: str) -> dict:
+    return {"name": name, "Ts": 0.01, "inputs": [{"name": f"u{i + 1}", "unit": ""} for i in range(n_u)],
+            "outputs": [{"name": f"y{i + 1}", "unit": ""} for i in range(n_y)]}
+
+
+def on_path(arch: str, hidden: int, n_u: int, n_y: int, order: int, seed: int, **options):
+    """A network on a linear path of ``order`` states, its path and correction random (small, stable) and seeded."""
+    torch.manual_seed(seed)
+    config = ModelConfig(arch=arch, n_u=n_u, n_y=n_y, hidden=hidden, linear_order=order, **options)
+    model = build_model(config, ports(n_u, n_y, f"{arch}{hidden}_path")).eval()
+    with torch.no_grad():
+        for name, t in [*model.named_parameters(), *model.named_buffers()]:
+            if name.startswith(("lin_", "alpha")):
+                t.normal_(0, 0.3 / order ** 0.5)
+    return model
+
+
+def plain(n_u: int, n_y: int, hidden: int = 32):
+    torch.manual_seed(0)
+    return build_model(ModelConfig(arch="gru", n_u=n_u, n_y=n_y, hidden=hidden), ports(n_u, n_y, "plain")).eval()
+
+
+def user_cases() -> dict:
+    """What the defaults give users (issue 36): a default training's FMU (two GRU-32 on a linear path) with 1 and 3
+    outputs, one member of it and the plain GRU-32 of the same ports; a search's mixed ensemble (LSTM-64 + GRU-32);
+    a GRU-32 with an init window of 10; the hybrid valve (GRU-32 correction inside RK4)."""
+    from nnfmu.hybrid import HybridConfig
+
+    cases = {}
+    for n_y, order in ((1, 2), (3, 6)):
+        members = [on_path("gru", 32, 1, n_y, order, seed) for seed in (0, 1)]
+        cases.update({f"plain-{n_y}y": plain(1, n_y), f"member-{n_y}y": members[0],
+                      f"default-{n_y}y": EnsembleStepModel.from_members(members)})
+    cases["search"] = EnsembleStepModel.from_members([on_path("lstm", 64, 1, 1, 2, 2), on_path("gru", 32, 1, 1, 2, 3)])
+    cases["initwin"] = on_path("gru", 32, 1, 1, 2, 4, init_window=10)
+    torch.manual_seed(5)
+    hybrid = build_model(HybridConfig(n_u=2, n_y=2, physics="valve", hidden=32)).eval()
+    with torch.no_grad():  # the correction starts at zero, which CasADi would fold away
+        for prm in hybrid.correction.parameters():
+            prm.normal_(0, 0.1)
+    cases["hybrid"] = hybrid
+    return cases
 
 
 def pinned(core: int, command: list[str]) -> str:
@@ -170,6 +222,8 @@ def build_cases(args, work: Path) -> tuple[dict, dict]:
     cases.update({f"{arch}32": make_network(arch, 32) for arch in args.archs})
     if "tcn" in args.archs:
         cases["tcn64"] = make_network("tcn", 64)
+    if args.users:
+        cases.update(user_cases())
     fmus, export_s = {}, {}
     for name, network in cases.items():
         model = casadi_model(network)
@@ -265,6 +319,17 @@ def targets(rows: dict, peak: float) -> None:
                          f"vs {rows['gru64']['weights']} weights)")
     if "tcn32" in rows:
         line(rows["tcn32"]["us"]["fast"] <= 1.5, f"TCN default <= 1.5 us: {rows['tcn32']['us']['fast']:.3f} us")
+    if any(name.startswith("default-") for name in rows):
+        print("targets (issue 36), fast and float32 builds:")
+    for n_y in (n for n in (1, 3) if f"default-{n}y" in rows):
+        us = {k: rows[f"{k}-{n_y}y"]["us"] for k in ("plain", "member", "default")}
+        for b in ("fast", "fast f32"):
+            ratio = us["member"][b] / us["plain"][b]
+            line(ratio <= 1.2, f"{n_y} output(s), {b}: a default member within 1.2x of the plain GRU-32: {ratio:.2f}x "
+                               f"({us['member'][b]:.3f} vs {us['plain'][b]:.3f} us)")
+            ratio = us["default"][b] / us["member"][b]
+            line(ratio <= 2.2, f"{n_y} output(s), {b}: the two-member default within 2.2x of one member: {ratio:.2f}x "
+                               f"({us['default'][b]:.3f} us)")
 
 
 def main(argv=None) -> None:
@@ -275,6 +340,8 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=3500)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--core", type=int, default=max(os.sched_getaffinity(0)), help="the core to pin to")
+    parser.add_argument("--no-users", dest="users", action="store_false",
+                        help="leave out what the defaults give users (default training, search, init window, hybrid)")
     parser.add_argument("--torch", action="store_true", help="also time torch eager for the GRU-64")
     parser.add_argument("--json", type=Path, help="also write the figures to this file")
     args = parser.parse_args(argv)
