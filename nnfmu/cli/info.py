@@ -125,15 +125,15 @@ def _fmu_step_cost(path: Path) -> dict | None:
 
 def _checkpoint_step_cost(path: Path) -> dict | str:
     """The float64 FMU step's weights, bytes and FLOPs, from the model's CasADi step (as ``nnfmu export`` builds it)."""
-    from nnfmu.errors import ExportError
+    from nnfmu.errors import NnfmuError
     from nnfmu.export import to_casadi
     from nnfmu.export.step_cost import function_cost
     from nnfmu.models import load_model
 
     try:
         _, step = to_casadi(load_model(path).double(), verify=False)
-    except ExportError as exc:
-        return f"not exportable: {exc}"
+    except NnfmuError as exc:  # the rest of the description stands without it
+        return f"unknown: the checkpoint does not export ({exc})"
     return function_cost(step).as_dict()
 
 
