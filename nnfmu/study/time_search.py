@@ -134,7 +134,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     trials, halving = Trials(), Halving(grace)
 
     def end() -> float:  # the trials' end: the selection's time measured on the trials' validation runs
-        return final - reserve - _select_seconds(trials.valid_s, test_runs, budget)
+        return final - reserve - _select_seconds(trials, test_runs, budget)
 
     def job(i: int) -> dict:
         mc, tc = trial_configs(points[i], model_config, train_config, given)
@@ -200,11 +200,13 @@ def _test_runs(dataset: Dataset, cfg: TrainConfig, init_window: int) -> float:
     return MAX_MEMBERS * 2.0 * (2 if init_window > 1 else 1) * dataset.test.n_samples / valid.n_samples
 
 
-def _select_seconds(valid_s: dict, test_runs: float, budget: float) -> float:
-    """The seconds kept for the selection and the test scores: measured, or :data:`SELECT_SHARE` of the budget."""
-    if not valid_s:
+def _select_seconds(trials: Trials, test_runs: float, budget: float) -> float:
+    """The seconds kept for the selection and the test scores: measured on the validation free runs of the
+    :data:`MAX_CANDIDATES` best trials so far, or :data:`SELECT_SHARE` of the budget before any epoch."""
+    if not trials.valid_s:
         return SELECT_SHARE * budget
-    one = max(valid_s.values())
+    best = sorted(trials.scores, key=trials.scores.get)[:MAX_CANDIDATES]
+    one = max(trials.valid_s[i] for i in best)
     return min(SELECT_SHARE * budget, max(MIN_SELECT_S, SELECT_SAFETY * one * (SELECT_RUNS + test_runs)))
 
 

@@ -100,8 +100,8 @@ class _Worker:
 class Trials:
     """What :func:`run_trials` fills as the trials end: ``records`` (trial -> the worker's record, with ``last``: its
     last epoch report), ``started`` (trials 0 .. started-1 were handed to a worker), ``best`` (``(seconds since the
-    start, trial, best validation NRMSE)`` each time the search's best so far fell) and ``valid_s`` (trial -> the
-    seconds of its last validation free run); ``seconds``: how long the trials ran; ``workers``: process id ->
+    start, trial, best validation NRMSE)`` each time the search's best so far fell), ``valid_s`` (trial -> the
+    seconds of its last validation free run) and ``scores`` (trial -> its best validation NRMSE so far); ``seconds``: how long the trials ran; ``workers``: process id ->
     ``(CPU seconds, seconds it waited for a core)`` of each worker, as last read (Linux; empty elsewhere)."""
 
     records: dict = field(default_factory=dict)
@@ -110,6 +110,7 @@ class Trials:
     workers: dict = field(default_factory=dict)
     best: list = field(default_factory=list)
     valid_s: dict = field(default_factory=dict)
+    scores: dict = field(default_factory=dict)
 
     def sample(self, workers: list) -> None:
         """Read the workers' CPU time and run-queue wait (``/proc/<pid>/schedstat``: other work on the cores shows
@@ -123,7 +124,7 @@ class Trials:
 
     def note(self, trial: int, report: dict, since: float) -> None:
         self.valid_s[trial] = float(report.get("valid_s", 0.0))
-        score = report["best_valid_nrmse"]
+        score = self.scores[trial] = report["best_valid_nrmse"]
         if not self.best or score < self.best[-1][2]:
             self.best.append((time.monotonic() - since, trial, score))
 
@@ -151,8 +152,11 @@ def run_trials(n: int, job: Callable[[int], dict], *, data: Path, folder: Path, 
     since, live = time.monotonic(), []
     selector = selectors.DefaultSelector()
 
+    def more() -> bool:
+        return trials.started < n and end() - time.monotonic() >= min_left_s
+
     def assign(worker: _Worker) -> None:
-        if trials.started < n and end() - time.monotonic() >= min_left_s:
+        if more():
             i = trials.started
             trials.started += 1
             worker.trial, worker.last = i, {}
@@ -176,8 +180,9 @@ def run_trials(n: int, job: Callable[[int], dict], *, data: Path, folder: Path, 
         return worker
 
     try:
-        for k in range(cpus):
-            assign(spawn(k))
+        for k in range(min(cpus, n)):
+            if more():
+                assign(spawn(k))
         while any(w.trial is not None for w in live):
             trials.sample(live)
             if time.monotonic() > end() + LATE_S:
@@ -195,7 +200,8 @@ def run_trials(n: int, job: Callable[[int], dict], *, data: Path, folder: Path, 
                         worker.trial = None
                         if on_done is not None:
                             on_done(i, trials.records[i])
-                        assign(spawn(len(live)))
+                        if more():
+                            assign(spawn(len(live)))
                     continue
                 worker.buffer += chunk
                 while b"\n" in worker.buffer:
