@@ -108,6 +108,20 @@ def test_successive_halving_stops_a_trial_trailing_at_a_rung_and_never_trial_zer
     assert halving.stopped == {3}
 
 
+def test_once_every_point_started_the_best_points_that_trained_to_their_stop_train_again_with_further_seeds():
+    from nnfmu.study.time_space import again
+
+    point = {"arch": "gru", "hidden": 32, "lr": 3e-3, "feedback_noise": 0.0, "truncate": None}
+    run = [{**point, "hidden": h, "seed": 0} for h in (8, 16, 32, 64)]
+    scores, halved = {0: 0.5, 1: 0.3, 2: 0.4, 3: 0.2}, {3}  # trial 3 is best but was stopped early: not repeated
+    assert again(run, {}, set(), 2) is None  # nothing finished yet
+    picked = []
+    for _ in range(3):
+        run.append(again(run, scores, halved, 2))
+        picked.append((run[-1]["hidden"], run[-1]["seed"]))
+    assert picked == [(16, 1), (32, 1), (16, 2)]  # the two best points in turn, the better first
+
+
 def test_a_trial_whose_worker_dies_is_a_failed_row_and_a_fresh_worker_takes_the_next(tmp_path):
     """A worker that ends in the middle of a trial (here: a job it cannot read) costs that trial only."""
     from nnfmu.data import save_dataset
@@ -119,7 +133,7 @@ def test_a_trial_whose_worker_dies_is_a_failed_row_and_a_fresh_worker_takes_the_
     jobs = [{"trial": 0, "model_config": model},  # no train_config: the worker's KeyError ends it
             {"trial": 1, "model_config": model, "train_config": TrainConfig(epochs=2).to_dict()}]
     trials, done = Trials(), []
-    run_trials(2, jobs.__getitem__, data=data, folder=tmp_path, linear=None, cpus=1,
+    run_trials(lambda i: jobs[i] if i < 2 else None, data=data, folder=tmp_path, linear=None, cpus=1,
                end=lambda: time.monotonic() + 120, min_left_s=1.0, halving=Halving(3), trials=trials,
                on_done=lambda i, record: done.append(i))
     assert done == [0, 1] and trials.started == 2
@@ -157,10 +171,12 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     out = tmp_path / "kept.pt"
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(time_search, "search_for", recorded_search)
+        mp.setattr(time_search, "again", lambda *a: None)  # no further seeds: the search ends with its 3 points
         assert run_search(args, ds, model, train, out, types.SimpleNamespace(type="cpu"), None, given) == 0
     (result,) = results
     rows = result.rows
     assert [r["trial"] for r in rows] == [0, 1, 2] and {r["lr"] for r in rows} == {1e-3, 3e-3, 1e-2}
+    assert {r["seed"] for r in rows} == {train.seed}
     assert (rows[0]["lr"], rows[0]["epochs"], rows[0]["status"], rows[0]["stopped"]) == (3e-3, 12, "epochs", False)
     assert result.best_valid_nrmse <= rows[0]["best_valid_nrmse"]
     ckpt = load_checkpoint(out)
@@ -184,7 +200,7 @@ def test_an_interrupted_search_keeps_the_best_finished_trial_or_nothing(finished
 
     ds = dataset(true_system(), noise=0.05)
 
-    def interrupted(n, job, *, folder, trials, **kwargs):
+    def interrupted(job, *, folder, trials, **kwargs):
         trials.started = 2
         assert job(0)["model_config"]["arch"] == "gru" and job(1)["trial"] == 1
         if finished:

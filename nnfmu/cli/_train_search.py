@@ -90,18 +90,20 @@ def _cell(value, fmt: str) -> str:
 
 
 def print_table(rows: list, kept=(), usage: dict | None = None) -> None:
-    """One row per trial: its settings, epochs run, best validation NRMSE, halving's stop, CPU seconds, how it ended.
+    """One row per trial: its settings and seed, epochs run, best validation NRMSE, halving's stop, CPU seconds, how it
+    ended.
 
     ``kept``: the trials of the kept model (one, or an ensemble's), starred. ``usage``: the search's
     :attr:`~nnfmu.study.time_search.TimeSearchResult.usage`, printed below the table.
     """
     kept = tuple(kept)
-    head = ("trial", "arch", "hidden", "lr", "noise", "window", "epochs", "valid NRMSE", "halved", "CPU-s", "end")
+    head = ("trial", "arch", "hidden", "lr", "noise", "window", "seed", "epochs", "valid NRMSE", "halved", "CPU-s",
+            "end")
     table = [head]
     for r in rows:
         table.append((f"{r['trial']}{'*' if r['trial'] in kept else ''}", r["arch"], str(r["hidden"]),
                       f"{r['lr']:g}", f"{r['feedback_noise']:g}", "whole" if r["truncate"] is None else
-                      str(r["truncate"]), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
+                      str(r["truncate"]), str(r.get("seed", "-")), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
                       "stopped" if r["stopped"] else "-", _cell(r["cpu_s"], ".1f"),
                       r["status"] if r["error"] is None else f"{r['status']}: {r['error']}"))
     widths = [max(len(row[j]) for row in table) for j in range(len(head) - 1)]

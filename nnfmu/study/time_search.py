@@ -41,7 +41,7 @@ from pathlib import Path
 from nnfmu.data import Dataset, save_dataset
 from nnfmu.errors import ConfigError
 from nnfmu.limits import UNBOUNDED_EPOCHS
-from nnfmu.study.time_space import label, trial_configs, trial_points
+from nnfmu.study.time_space import again, label, trial_configs, trial_points
 from nnfmu.study.trial_pool import Halving, Trials, run_trials
 from nnfmu.training import TrainConfig
 from nnfmu.training.ensemble_select import MAX_MEMBERS
@@ -131,22 +131,27 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     grace = max(3, math.ceil(GRACE_STEPS / _steps_per_epoch(trials_ds, train_config)))
     points = trial_points(model_config, train_config, given, MAX_POINTS, seed, int(trials_ds.train.lengths.max()))
     test_runs = _test_runs(dataset, train_config, model_config.init_window)
-    trials, halving = Trials(), Halving(grace)
+    trials, halving, run = Trials(), Halving(grace), []  # run: the trials' points, with their seeds
 
     def end() -> float:  # the trials' end: the selection's time measured on the trials' validation runs
         return final - reserve - _select_seconds(trials, test_runs, budget)
 
-    def job(i: int) -> dict:
-        mc, tc = trial_configs(points[i], model_config, train_config, given)
-        return {"trial": i, "model_config": mc.to_dict(),
-                "train_config": _budgeted(tc, _steps_per_epoch(trials_ds, tc), grace).to_dict()}
+    def job(i: int) -> dict | None:
+        point = ({**points[i], "seed": train_config.seed} if i < len(points) else
+                 again(run, trials.scores, halving.stopped, MAX_CANDIDATES))
+        if point is None:  # every point started, and none trained to its own stop yet
+            return None
+        run.append(point)
+        mc, tc = trial_configs(point, model_config, train_config, given)
+        tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(trials_ds, tc), grace)
+        return {"trial": i, "model_config": mc.to_dict(), "train_config": tc.to_dict()}
 
     def echo(i: int, record: dict) -> None:
         score = record.get("last", {}).get("best_valid_nrmse")
         text = "no epoch finished" if score is None else (f"best validation NRMSE {score:.4f} after "
                                                           f"{record['last']['epoch']} epochs")
         stopped = ", stopped by successive halving" if i in halving.stopped else ""
-        print(f"search: trial {i} {label(points[i])}: {text}{stopped}", flush=True)
+        print(f"search: trial {i} {label(run[i])}: {text}{stopped}", flush=True)
 
     with tempfile.TemporaryDirectory(prefix="nnfmu-search-") as tmp:
         folder = Path(tmp)
@@ -154,11 +159,11 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
         linear_file = None if linear is None else linear.save(folder / "linear.json")
         stopped_by = None
         try:
-            run_trials(len(points), job, data=data, folder=folder, linear=linear_file, cpus=cpus, end=end,
+            run_trials(job, data=data, folder=folder, linear=linear_file, cpus=cpus, end=end,
                        min_left_s=MIN_TRIAL_S, halving=halving, trials=trials, on_done=echo if progress else None)
         except BaseException as exc:  # Ctrl-C, SIGTERM or a failure: the best finished trial is still kept
             stopped_by = exc
-        rows = [_row(i, points[i], folder, trials.records.get(i, {}), i in halving.stopped)
+        rows = [_row(i, run[i], folder, trials.records.get(i, {}), i in halving.stopped)
                 for i in range(trials.started)]
         kept = _keep(rows, folder, dataset, out, None if stopped_by is not None else final - reserve / 2)
         if stopped_by is not None:
@@ -230,10 +235,15 @@ def _stalled(found: tuple, rows: list, n_points: int, trial_minutes: float) -> s
         return ""
     after = [r for r in rows if r["trial"] > found[-1][1]]
     halved = sum(r["stopped"] for r in after)
-    why = (f"every one of the space's {n_points} points was tried" if len(rows) == n_points else
-           f"none of the {len(after)} trials started after trial {found[-1][1]} beat it on validation "
-           f"({halved} stopped by successive halving)")
-    return f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: {why}"
+    if not after:
+        return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: the trials "
+                "still training then did not improve on it, and no later trial started")
+    seeds = max(0, len(rows) - n_points)
+    tried = f"every one of the space's {n_points} points was tried and " if seeds else ""
+    more = f", {seeds} of them the best points again with further seeds" if seeds else ""
+    return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: {tried}none "
+            f"of the {len(after)} trials after trial {found[-1][1]} beat it on validation ({halved} stopped by "
+            f"successive halving{more})")
 
 
 def _resolved(dataset: Dataset, cfg: TrainConfig) -> TrainConfig:

@@ -139,93 +139,105 @@ def _start(data: Path, folder: Path, linear: Path | None, k: int) -> _Worker:
     return _Worker(proc, log)
 
 
-def run_trials(n: int, job: Callable[[int], dict], *, data: Path, folder: Path, linear: Path | None, cpus: int,
+def run_trials(job: Callable[[int], dict | None], *, data: Path, folder: Path, linear: Path | None, cpus: int,
                end: Callable[[], float], min_left_s: float, halving: Halving, trials: Trials,
                on_done: Callable[[int, dict], None] | None = None) -> None:
-    """Train trials ``0 .. n-1`` (``job(i)``: the worker's job) in ``cpus`` workers while time is left.
+    """Train trials ``0, 1, ...`` (``job(i)``: the worker's job, or None: none for now) in ``cpus`` workers.
 
     ``end()``: the :func:`time.monotonic` time the trials end by (asked again after every epoch); no trial starts
-    with less than ``min_left_s`` left. ``trials`` is filled as they end (so that a caller stopped by Ctrl-C keeps
-    what is done); a trial whose worker died is recorded as failed, with the last line its worker wrote to stderr,
-    and a fresh worker takes the next. ``on_done(i, record)`` after each trial.
+    with less than ``min_left_s`` left. A worker with no job waits until another trial ends (which may make one); the
+    run ends when no trial runs. ``trials`` is filled as they end (so that a caller stopped by Ctrl-C keeps what is
+    done); a trial whose worker died is recorded as failed, with the last line its worker wrote to stderr, and a
+    fresh worker takes the next. ``on_done(i, record)`` after each trial.
     """
-    since, live = time.monotonic(), []
-    selector = selectors.DefaultSelector()
-
-    def more() -> bool:
-        return trials.started < n and end() - time.monotonic() >= min_left_s
-
-    def assign(worker: _Worker) -> None:
-        if more():
-            i = trials.started
-            trials.started += 1
-            worker.trial, worker.last = i, {}
-            spec = job(i)
-            worker.send(json.dumps({**spec, "end": time.time() + (end() - time.monotonic())}))
-        else:
-            worker.trial = None
-            worker.close()
-
-    def finish(worker: _Worker, record: dict) -> None:
-        i = worker.trial
-        trials.records[i] = {**record, "last": worker.last}
-        if on_done is not None:
-            on_done(i, trials.records[i])
-        assign(worker)
-
-    def spawn(k: int) -> _Worker:
-        worker = _start(data, folder, linear, k)
-        selector.register(worker.proc.stdout, selectors.EVENT_READ, worker)
-        live.append(worker)
-        return worker
-
+    run = _Run(job, data, folder, linear, end, min_left_s, halving, trials, on_done)
     try:
-        for k in range(min(cpus, n)):
-            if more():
-                assign(spawn(k))
-        while any(w.trial is not None for w in live):
-            trials.sample(live)
+        for _ in range(cpus):
+            if run.more():
+                run.assign(run.spawn())
+        while any(w.trial is not None for w in run.live):
+            trials.sample(run.live)
             if time.monotonic() > end() + LATE_S:
-                _interrupt([w for w in live if w.trial is not None])
-            for key, _ in selector.select(timeout=1.0):
-                worker = key.data
-                chunk = os.read(key.fd, 65536)
-                if not chunk:  # the worker ended in the middle of a trial
-                    selector.unregister(key.fileobj)
-                    if worker.trial is not None:
-                        i = worker.trial
-                        worker.proc.wait()
-                        trials.records[i] = {"status": "failed", "error": f"its worker ended: {worker.why_ended()}",
-                                             "cpu_s": worker.last.get("cpu_s"), "last": worker.last}
-                        worker.trial = None
-                        if on_done is not None:
-                            on_done(i, trials.records[i])
-                        if more():
-                            assign(spawn(len(live)))
-                    continue
-                worker.buffer += chunk
-                while b"\n" in worker.buffer:
-                    line, worker.buffer = worker.buffer.split(b"\n", 1)
-                    message = json.loads(line)
-                    if "done" in message:
-                        finish(worker, message["done"])
-                        continue
-                    worker.last = message
-                    trials.note(worker.trial, message, since)
-                    keep = halving.keep(worker.trial, message["epoch"], message["best_valid_nrmse"])
-                    next_epoch = message.get("seconds", 0.0) + message.get("valid_s", 0.0)
-                    go = keep and time.monotonic() + next_epoch <= end()  # the next epoch ends in time
-                    worker.send("go" if go else "stop")
+                _interrupt([w for w in run.live if w.trial is not None])
+            for key, _ in run.selector.select(timeout=1.0):
+                run.read(key)
     except BaseException:  # Ctrl-C, SIGTERM: every worker stops after its epoch and keeps its checkpoint
-        _interrupt([w for w in live if w.proc.poll() is None])
+        _interrupt([w for w in run.live if w.proc.poll() is None])
         raise
     finally:
-        trials.sample(live)
-        trials.seconds = time.monotonic() - since
-        for worker in live:
+        trials.sample(run.live)
+        trials.seconds = time.monotonic() - run.since
+        for worker in run.live:
             worker.close()
-        _reap(live)
-        selector.close()
+        _reap(run.live)
+        run.selector.close()
+
+
+class _Run:
+    """The state of :func:`run_trials`: the workers, the idle ones, and what to do with a worker's message."""
+
+    def __init__(self, job, data, folder, linear, end, min_left_s, halving, trials, on_done):
+        self.job, self.data, self.folder, self.linear, self.end = job, data, folder, linear, end
+        self.min_left_s, self.halving, self.trials, self.on_done = min_left_s, halving, trials, on_done
+        self.since, self.live, self.idle = time.monotonic(), [], []
+        self.selector = selectors.DefaultSelector()
+
+    def more(self) -> bool:
+        return self.end() - time.monotonic() >= self.min_left_s
+
+    def spawn(self) -> _Worker:
+        worker = _start(self.data, self.folder, self.linear, len(self.live))
+        self.selector.register(worker.proc.stdout, selectors.EVENT_READ, worker)
+        self.live.append(worker)
+        return worker
+
+    def assign(self, worker: _Worker) -> None:
+        """The next job to ``worker``, or it waits."""
+        spec = self.job(self.trials.started) if self.more() else None
+        if spec is None:
+            worker.trial = None
+            self.idle.append(worker)
+            return
+        worker.trial, worker.last = self.trials.started, {}
+        self.trials.started += 1
+        worker.send(json.dumps({**spec, "end": time.time() + (self.end() - time.monotonic())}))
+
+    def ended(self, worker: _Worker, record: dict) -> None:
+        """Record ``worker``'s trial; a trial that ended may have made a job for the waiting workers too."""
+        i, worker.trial = worker.trial, None
+        self.trials.records[i] = {**record, "last": worker.last}
+        if self.on_done is not None:
+            self.on_done(i, self.trials.records[i])
+        waiting, self.idle = self.idle, []
+        for other in [worker] + waiting:
+            if other.proc.poll() is None:
+                self.assign(other)
+        if worker.proc.poll() is not None and self.more():  # a worker died: a fresh one in its place
+            self.assign(self.spawn())
+
+    def read(self, key) -> None:
+        """Handle what a worker wrote: an epoch's report (answered), a trial's end, or its own end."""
+        worker = key.data
+        chunk = os.read(key.fd, 65536)
+        if not chunk:  # the worker ended; in the middle of a trial, the trial failed
+            self.selector.unregister(key.fileobj)
+            worker.proc.wait()
+            if worker.trial is not None:
+                self.ended(worker, {"status": "failed", "error": f"its worker ended: {worker.why_ended()}",
+                                    "cpu_s": worker.last.get("cpu_s")})
+            return
+        worker.buffer += chunk
+        while b"\n" in worker.buffer:
+            line, worker.buffer = worker.buffer.split(b"\n", 1)
+            message = json.loads(line)
+            if "done" in message:
+                self.ended(worker, message["done"])
+                continue
+            worker.last = message
+            self.trials.note(worker.trial, message, self.since)
+            keep = self.halving.keep(worker.trial, message["epoch"], message["best_valid_nrmse"])
+            next_epoch = message.get("seconds", 0.0) + message.get("valid_s", 0.0)
+            worker.send("go" if keep and time.monotonic() + next_epoch <= self.end() else "stop")
 
 
 def _interrupt(workers: list) -> None:
