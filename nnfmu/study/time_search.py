@@ -131,27 +131,11 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     grace = max(3, math.ceil(GRACE_STEPS / _steps_per_epoch(trials_ds, train_config)))
     points = trial_points(model_config, train_config, given, MAX_POINTS, seed, int(trials_ds.train.lengths.max()))
     test_runs = _test_runs(dataset, train_config, model_config.init_window)
-    trials, halving, run = Trials(), Halving(grace), []  # run: the trials' points, with their seeds
+    jobs = _Jobs(points, model_config, train_config, given, trials_ds, grace)
+    trials, halving, run = jobs.trials, jobs.halving, jobs.run
 
     def end() -> float:  # the trials' end: the selection's time measured on the trials' validation runs
         return final - reserve - _select_seconds(trials, test_runs, budget)
-
-    def job(i: int) -> dict | None:
-        point = ({**points[i], "seed": train_config.seed} if i < len(points) else
-                 again(run, trials.scores, halving.stopped, MAX_CANDIDATES))
-        if point is None:  # every point started, and none trained to its own stop yet
-            return None
-        run.append(point)
-        mc, tc = trial_configs(point, model_config, train_config, given)
-        tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(trials_ds, tc), grace)
-        return {"trial": i, "model_config": mc.to_dict(), "train_config": tc.to_dict()}
-
-    def echo(i: int, record: dict) -> None:
-        score = record.get("last", {}).get("best_valid_nrmse")
-        text = "no epoch finished" if score is None else (f"best validation NRMSE {score:.4f} after "
-                                                          f"{record['last']['epoch']} epochs")
-        stopped = ", stopped by successive halving" if i in halving.stopped else ""
-        print(f"search: trial {i} {label(run[i])}: {text}{stopped}", flush=True)
 
     with tempfile.TemporaryDirectory(prefix="nnfmu-search-") as tmp:
         folder = Path(tmp)
@@ -159,8 +143,8 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
         linear_file = None if linear is None else linear.save(folder / "linear.json")
         stopped_by = None
         try:
-            run_trials(job, data=data, folder=folder, linear=linear_file, cpus=cpus, end=end,
-                       min_left_s=MIN_TRIAL_S, halving=halving, trials=trials, on_done=echo if progress else None)
+            run_trials(jobs.job, data=data, folder=folder, linear=linear_file, cpus=cpus, end=end,
+                       min_left_s=MIN_TRIAL_S, halving=halving, trials=trials, on_done=jobs.echo if progress else None)
         except BaseException as exc:  # Ctrl-C, SIGTERM or a failure: the best finished trial is still kept
             stopped_by = exc
         rows = [_row(i, run[i], folder, trials.records.get(i, {}), i in halving.stopped)
@@ -179,6 +163,38 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     if kept is None:
         return TimeSearchResult(**extra)
     return dataclasses.replace(kept, **extra)
+
+
+class _Jobs:
+    """The trials' jobs: the space's points in order (the training's seed), then :func:`again`'s further seeds.
+
+    ``run``: the point of every trial handed out so far, with its ``seed``; ``trials`` and ``halving``: what the
+    workers reported and what successive halving stopped."""
+
+    def __init__(self, points: list, model_config, train_config: TrainConfig, given: set, dataset: Dataset,
+                 grace: int):
+        self.points, self.model_config, self.train_config, self.given = points, model_config, train_config, given
+        self.dataset, self.grace = dataset, grace
+        self.run, self.trials, self.halving = [], Trials(), Halving(grace)
+
+    def job(self, i: int) -> dict | None:
+        """Trial ``i``'s job for a worker; None while every point has started and none trained to its own stop."""
+        point = ({**self.points[i], "seed": self.train_config.seed} if i < len(self.points) else
+                 again(self.run, self.trials.scores, self.halving.stopped, MAX_CANDIDATES))
+        if point is None:
+            return None
+        self.run.append(point)
+        mc, tc = trial_configs(point, self.model_config, self.train_config, self.given)
+        tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(self.dataset, tc), self.grace)
+        return {"trial": i, "model_config": mc.to_dict(), "train_config": tc.to_dict()}
+
+    def echo(self, i: int, record: dict) -> None:
+        """One printed line as trial ``i`` ends."""
+        score = record.get("last", {}).get("best_valid_nrmse")
+        text = "no epoch finished" if score is None else (f"best validation NRMSE {score:.4f} after "
+                                                          f"{record['last']['epoch']} epochs")
+        stopped = ", stopped by successive halving" if i in self.halving.stopped else ""
+        print(f"search: trial {i} {label(self.run[i])}: {text}{stopped}", flush=True)
 
 
 def _budgeted(cfg: TrainConfig, steps: int, grace: int) -> TrainConfig:
