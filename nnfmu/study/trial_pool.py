@@ -7,10 +7,11 @@ then trains trial after trial, so a core whose trial ended starts the next at on
 Tune's, before) spent seconds of every trial's core on starting and importing, while most trials that
 :class:`Halving` stops train for one or two seconds.
 
-After every epoch a worker reports the trial's best validation NRMSE and waits for ``go`` or ``stop``:
+After every epoch a worker reports the trial's best validation NRMSE and goes on, without waiting for an answer
+(a driver descheduled on busy cores would otherwise hold the workers' cores idle); the driver answers ``stop`` when
 :class:`Halving` (ASHA: Li et al., "A system for massively parallel hyperparameter tuning", MLSys 2020) stops a
-trial that trails the others at the same epoch; the search's end, which may move earlier while the trials run
-(``end()``), stops every trial after its epoch.
+trial that trails the others at the same epoch, or when the next epoch would end after the search's end, which may
+move earlier while the trials run (``end()``). The worker stops after the epoch in which the answer arrives.
 """
 
 from __future__ import annotations
@@ -237,7 +238,8 @@ class _Run:
             self.trials.note(worker.trial, message, self.since)
             keep = self.halving.keep(worker.trial, message["epoch"], message["best_valid_nrmse"])
             next_epoch = message.get("seconds", 0.0) + message.get("valid_s", 0.0)
-            worker.send("go" if keep and time.monotonic() + next_epoch <= self.end() else "stop")
+            if not (keep and time.monotonic() + next_epoch <= self.end()):
+                worker.send(f"stop {worker.trial}")
 
 
 def _interrupt(workers: list) -> None:

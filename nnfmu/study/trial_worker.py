@@ -7,15 +7,17 @@ then reads one job a line on stdin until stdin closes. A job is a JSON object: `
 ``model_config`` and ``train_config`` (dicts) and ``end`` (a :func:`time.time`; no epoch is started that would end
 after it). The trial is :func:`nnfmu.training.train` into ``FOLDER/trial-<i>.pt``, on the CPU with one thread.
 After every epoch the worker writes one JSON line to its stdout (``epoch``, ``valid_nrmse``, ``best_valid_nrmse``,
-``cpu_s``, ``seconds``: of its training, ``valid_s``: of its validation) and reads the reply, ``go`` or ``stop`` (the
-driver's successive halving, or the search's end); when the trial ends it writes ``{"done": record}`` (``status``,
-``error``, ``cpu_s``: the CPU seconds the trial took). Anything else printed goes to stderr.
+``cpu_s``, ``seconds``: of its training, ``valid_s``: of its validation) and goes on without waiting: the trial stops
+after the epoch in which the line ``stop <trial>`` arrives (the driver's successive halving, or the search's end),
+so a busy driver never holds a worker's core idle. When the trial ends the worker writes ``{"done": record}``
+(``status``, ``error``, ``cpu_s``: the CPU seconds the trial took). Anything else printed goes to stderr.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import select
 import sys
 import time
 from pathlib import Path
@@ -65,6 +67,47 @@ def run_trial(job: dict, dataset, linear, folder: Path, ask) -> dict:
     return record
 
 
+class _Inbox:
+    """The driver's lines on stdin, read without blocking between epochs (a job when idle, ``stop <trial>``)."""
+
+    def __init__(self):
+        self.buffer, self.closed = b"", False
+
+    def _read(self, wait: bool) -> None:
+        if self.closed or not (wait or select.select([0], [], [], 0)[0]):
+            return
+        chunk = os.read(0, 65536)
+        self.closed = not chunk
+        self.buffer += chunk
+
+    def _take(self) -> str | None:
+        line, sep, rest = self.buffer.partition(b"\n")
+        if not sep:
+            return None
+        self.buffer = rest
+        return line.decode()
+
+    def pending(self) -> list[str]:
+        """The lines that have arrived, without waiting."""
+        self._read(wait=False)
+        lines = []
+        while (line := self._take()) is not None:
+            lines.append(line)
+        return lines
+
+    def next_job(self) -> dict | None:
+        """The next job, waiting for it (``stop`` lines for trials that have ended are passed over); None at EOF."""
+        while True:
+            line = self._take()
+            if line is not None:
+                if line.startswith("{"):
+                    return json.loads(line)
+                continue
+            if self.closed:
+                return None
+            self._read(wait=True)
+
+
 def main(argv: list[str]) -> int:
     data, folder, *linear = argv
     channel = os.fdopen(os.dup(1), "w", buffering=1)  # the driver's pipe; whatever else prints goes to stderr
@@ -72,13 +115,15 @@ def main(argv: list[str]) -> int:
     sys.stdout = sys.stderr
     dataset, start = load_dataset(data), load_linear(linear[0]) if linear else None
     dataset = dataset.replace(splits={k: v for k, v in dataset.splits.items() if k != "test"})  # chosen without it
+    inbox = _Inbox()
+    while (job := inbox.next_job()) is not None:
+        stop = f"stop {job['trial']}"
 
-    def ask(report: dict) -> bool:
-        channel.write(json.dumps(report) + "\n")
-        return sys.stdin.readline().strip() == "go"  # "" when the driver has gone: stop
+        def ask(report: dict) -> bool:  # the driver's answer to an earlier epoch may still be on its way: no wait
+            channel.write(json.dumps(report) + "\n")
+            return stop not in inbox.pending() and not inbox.closed
 
-    for line in sys.stdin:
-        record = run_trial(json.loads(line), dataset, start, Path(folder), ask)
+        record = run_trial(job, dataset, start, Path(folder), ask)
         channel.write(json.dumps({"done": record}) + "\n")
     return 0
 
