@@ -152,9 +152,11 @@ def _table(printed: str) -> list[list[str]]:
 def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defaults_trained_to_their_stop(
         tmp_path, capsys):
     """A real search on a tiny linear system, its space cut to three points (the learning rate) so that it ends
-    when they do: trial 0 is the defaults trained to its own stop (its epochs), not stopped by the halving; the kept
-    model is at or below it on validation; the table reports the trials' CPU time and share."""
+    when they do: trial 0 is the plain training trained to its own stop (its epochs), the same numbers as train()
+    gives, not stopped by the halving; the kept model is at or below it on validation; the table reports the trials'
+    CPU time and share."""
     from nnfmu.study import time_search
+    from nnfmu.training import train as train_network
 
     args = _args(max_minutes=2.0, hidden=8, feedback_noise=0.0, truncate=None, arch="gru")
     ds = dataset(true_system(), noise=0.05)
@@ -178,6 +180,8 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     assert [r["trial"] for r in rows] == [0, 1, 2] and {r["lr"] for r in rows} == {1e-3, 3e-3, 1e-2}
     assert {r["seed"] for r in rows} == {train.seed}
     assert (rows[0]["lr"], rows[0]["epochs"], rows[0]["status"], rows[0]["stopped"]) == (3e-3, 12, "epochs", False)
+    plain = train_network(ds, model, train, device="cpu", threads=1)  # trial 0 is this training, in a worker
+    assert rows[0]["best_valid_nrmse"] == pytest.approx(plain.best_valid_nrmse, rel=1e-12)
     assert result.best_valid_nrmse <= rows[0]["best_valid_nrmse"]
     ckpt = load_checkpoint(out)
     assert ckpt["summary"]["best_valid_nrmse"] == result.best_valid_nrmse
