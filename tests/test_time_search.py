@@ -87,14 +87,16 @@ def test_the_table_has_a_row_per_trial_and_marks_the_kept_one(capsys):
             {"trial": 1, "arch": "tcn", "hidden": 16, "lr": 1e-2, "feedback_noise": 0.1, "truncate": 400,
              "epochs": 0, "best_valid_nrmse": None, "stopped": False, "cpu_s": None, "status": "diverged",
              "error": "the training loss became nan"}]
-    usage = {"cpu_s": 110.0, "cores": 2, "wall_s": 62.5, "cpu_share": 0.88, "waited_s": 4.0, "load": 2.1}
+    usage = {"cpu_s": 110.0, "cores": 2, "wall_s": 62.5, "cpu_share": 0.88, "workers_cpu_s": 113.0, "waited_s": 4.0,
+             "load": 2.1}
     print_table(rows, kept=(0,), usage=usage)
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split()[:4] == ["trial", "arch", "hidden", "lr"]
     assert lines[1].split()[:2] == ["0*", "gru"] and "0.2500" in lines[1] and "12.5" in lines[1]
     assert lines[2].split()[:2] == ["1", "tcn"] and "diverged: the training loss became nan" in lines[2]
     assert lines[3].startswith("* kept")
-    assert lines[4].startswith("CPU: the trials used 110 CPU-s of 2 cores x 62 s, 88 %; the workers waited 4 s")
+    assert lines[4].startswith("CPU: the trials used 110 CPU-s of 2 cores x 62 s, 88 %; the workers spent 3 CPU-s "
+                               "besides (start, imports) and waited 4 s for a core")
 
 
 def test_successive_halving_stops_a_trial_trailing_at_a_rung_and_never_trial_zero():

@@ -116,7 +116,8 @@ def print_table(rows: list, kept=(), usage: dict | None = None) -> None:
         print("* kept: their ensemble, chosen greedily on validation from the best trial on")
     if usage:
         waited = ("" if usage.get("waited_s") is None else
-                  f"; the workers waited {usage['waited_s']:.0f} s for a core other processes held")
+                  f"; the workers spent {usage['workers_cpu_s'] - usage['cpu_s']:.0f} CPU-s besides (start, imports) "
+                  f"and waited {usage['waited_s']:.0f} s for a core other processes held")
         load = "" if usage.get("load") is None else f" (machine load {usage['load']:.1f})"
         print(f"CPU: the trials used {usage['cpu_s']:.0f} CPU-s of {usage['cores']} cores x {usage['wall_s']:.0f} s, "
               f"{100 * usage['cpu_share']:.0f} %{waited}{load}")
