@@ -124,6 +124,23 @@ def test_once_every_point_started_the_best_points_that_trained_to_their_stop_tra
     assert picked == [(16, 1), (32, 1), (16, 2)]  # the two best points in turn, the better first
 
 
+def test_a_further_seed_of_a_point_trains_to_its_own_stop_as_trial_zero_does():
+    from nnfmu.study.time_search import _Jobs
+
+    ds = dataset(true_system())
+    model, train = ModelConfig(arch="gru", n_u=ds.n_u, n_y=ds.n_y), TrainConfig(epochs=50, patience=10)
+    points = trial_points(model, train, {"arch", "lr", "feedback_noise", "truncate"}, 10, seed=0, longest=500)
+    jobs = _Jobs(points, model, train, set(), ds, grace=3)
+    assert [jobs.job(i)["train_config"]["seed"] for i in range(len(points))] == [0, 0, 0]  # the 3 widths
+    assert jobs.job(3) is None  # every point started, none ended yet
+    jobs.trials.scores.update({0: 0.4, 1: 0.3, 2: 0.5})
+    again = jobs.job(3)
+    assert (again["model_config"]["hidden"], again["train_config"]["seed"]) == (points[1]["hidden"], 1)
+    for epoch in (3, 6, 12):  # far behind a trial that reached each rung before it, and never stopped
+        assert jobs.halving.keep(1, epoch, 0.1) and jobs.halving.keep(3, epoch, 9.0)
+    assert 3 not in jobs.halving.stopped
+
+
 def test_a_trial_whose_worker_dies_is_a_failed_row_and_a_fresh_worker_takes_the_next(tmp_path):
     """A worker that ends in the middle of a trial (here: a job it cannot read) costs that trial only."""
     from nnfmu.data import save_dataset

@@ -183,6 +183,8 @@ class _Jobs:
                  again(self.run, self.trials.scores, self.halving.stopped, MAX_CANDIDATES))
         if point is None:
             return None
+        if i >= len(self.points):  # a point that trained to its own stop, with another seed: it does so too
+            self.halving.exempt.add(i)
         self.run.append(point)
         mc, tc = trial_configs(point, self.model_config, self.train_config, self.given)
         tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(self.dataset, tc), self.grace)

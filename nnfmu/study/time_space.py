@@ -123,7 +123,7 @@ def again(run: list, scores: dict, halved: set, keep: int) -> dict | None:
     ``halved``: the trials successive halving stopped. Among the ``keep`` points best on validation (a point's
     score: its best trial's) that trained to their own stop, the one with the fewest seeds so far (the better first)
     gets the next seed: further seeds of the best points give the ensemble selection members that differ by their
-    seed alone. None while no point qualifies.
+    seed alone (the search trains them to their own stop, as it does trial 0). None while no point qualifies.
     """
     best, seeds = {}, {}
     for i, point in enumerate(run):
