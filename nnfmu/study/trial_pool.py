@@ -156,8 +156,11 @@ def run_trials(job: Callable[[int], dict | None], *, data: Path, folder: Path, l
         for _ in range(cpus):
             if run.more():
                 run.assign(run.spawn())
+        sampled = time.monotonic()
         while any(w.trial is not None for w in run.live):
-            trials.sample(run.live)
+            if time.monotonic() - sampled > 1.0:  # the workers' CPU time, while they are there to be read
+                trials.sample(run.live)
+                sampled = time.monotonic()
             if time.monotonic() > end() + LATE_S:
                 _interrupt([w for w in run.live if w.trial is not None])
             for key, _ in run.selector.select(timeout=1.0):
