@@ -15,8 +15,10 @@ the defaults it starts from. The whole search ends within the budget:
   :data:`END_RESERVE` of it (at least :data:`MIN_RESERVE_S`) is kept for the workers' last epochs and the copy
   of the kept model; before it, the time the ensemble selection and the test scores need (measured: the trials'
   validation free runs times the runs the selection makes, at most :data:`SELECT_SHARE` of the budget);
-- a core whose trial ended takes the next point while at least :data:`MIN_TRIAL_S` is left; a trial stops after an
-  epoch when the next would end past the trials' end.
+- a core whose trial ended takes the next point while at least :data:`MIN_TRIAL_S` is left; once every point has
+  started, one of the best points that trained to their own stop again, with the next seed
+  (:func:`~nnfmu.study.time_space.again`), trained to its own stop too; a trial stops after an epoch when the next
+  would end past the trials' end.
 
 The trials validate on the validation split only (the test split stays in the driver). The trial with the
 lowest best validation NRMSE kept in its checkpoint starts a greedy ensemble selection on validation

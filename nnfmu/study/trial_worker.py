@@ -46,7 +46,7 @@ def run_trial(job: dict, dataset, linear, folder: Path, ask) -> dict:
         go = ask({"epoch": epoch, "valid_nrmse": _finite(metrics["valid_nrmse"]),
                   "best_valid_nrmse": _finite(metrics["best_valid_nrmse"]), "cpu_s": time.process_time() - cpu0,
                   "seconds": metrics["seconds"], "valid_s": valid_s})
-        last[0] = time.monotonic()  # the driver's answer is not the next epoch's validation
+        last[0] = time.monotonic()  # writing the report is not the next epoch's validation
         if not go:
             stopped.append(epoch)
             raise StopTraining
