@@ -7,7 +7,7 @@ import os
 import pytest
 
 #: Modules that start Ray (a local instance or a loopback cluster): one at a time, on one worker.
-RAY_MODULES = {"test_cluster.py", "test_time_search.py", "test_tune.py", "test_tune_search.py"}
+RAY_MODULES = {"test_cluster.py", "test_tune.py", "test_tune_search.py"}
 
 
 def pytest_configure(config):

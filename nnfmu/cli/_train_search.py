@@ -16,34 +16,15 @@ _FIXING = ("arch", "hidden", "layers", "window", "dropout", "init_window", "lr",
 
 
 def applies(args: argparse.Namespace) -> bool:
-    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a planned architecture, in a new run, with Ray.
-
-    Without Ray (the optional extra ``tune``) one network trains for the budget, as before, after a note.
-    """
-    wanted = (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
-              and args.seeds is None and not args.resume and args.increment is None and _planned(args.arch))
-    return wanted and _ray_installed()
+    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a planned architecture, in a new run."""
+    return (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
+            and args.seeds is None and not args.resume and args.increment is None and _planned(args.arch))
 
 
 def _planned(arch: str | None) -> bool:
     from nnfmu.models import architectures
 
     return arch is None or architectures.architecture(arch).data_plan is True
-
-
-_noted: list = []
-
-
-def _ray_installed() -> bool:
-    try:
-        import ray  # noqa: F401
-    except ImportError:
-        if not _noted:
-            _noted.append(True)
-            print("note: --max-minutes alone searches with Ray Tune, which is not installed "
-                  "(pip install \"nnfmu[tune]\"); training one network for the budget instead")
-        return False
-    return True
 
 
 def given_options(args: argparse.Namespace, given=()) -> set:
@@ -68,16 +49,18 @@ def run_search(args: argparse.Namespace, ds, model_config, train_config, out, de
     knobs = {"arch": "--arch", "hidden": "--hidden", "lr": "--lr", "feedback_noise": "--feedback-noise",
              "truncate": "--truncate"}
     searched = [flag for name, flag in knobs.items() if name not in fixed]
-    print(f"search: {minutes:g} min over {' '.join(searched) or 'nothing (every knob given)'}; trial 0 is the "
-          "plain training, ASHA stops the trials that trail the others at the same epoch")
+    print(f"search: {minutes:g} min over {' '.join(searched) or 'nothing (every knob given)'} in one worker a core; "
+          "trial 0 is the plain training to its own stop, successive halving stops the other trials that trail at "
+          "the same epoch")
     result = search_for(ds, minutes, model_config=model_config, train_config=train_config, linear=linear,
                         out=out, given=fixed, seed=train_config.seed, progress=not args.quiet,
                         since=getattr(args, "started", None))
-    print_table(result.rows, result.members)
+    print_table(result.rows, result.members, result.usage)
+    if result.stalled:
+        print(f"search: {result.stalled}")
     if result.best is None:
-        raise TrainingError(f"no trial of the search finished an epoch in {minutes:g} minutes (starting Ray and "
-                            "its workers takes up to half a minute); give a larger --max-minutes, or --epochs N "
-                            "for one plain training")
+        raise TrainingError(f"no trial of the search finished an epoch in {minutes:g} minutes; give a larger "
+                            "--max-minutes, or --epochs N for one plain training")
     if len(result.members) > 1:
         scores = ", ".join(f"{v:.4f}" for v in result.member_scores)
         print(f"kept an ensemble of trials {', '.join(map(str, result.members))} (the mean output fed back, one "
@@ -106,18 +89,21 @@ def _cell(value, fmt: str) -> str:
     return format(value, fmt)
 
 
-def print_table(rows: list, kept=()) -> None:
-    """One row per trial: its settings, epochs run, best validation NRMSE, ASHA's stop, CPU seconds, how it ended.
+def print_table(rows: list, kept=(), usage: dict | None = None) -> None:
+    """One row per trial: its settings and seed, epochs run, best validation NRMSE, halving's stop, CPU seconds, how it
+    ended.
 
-    ``kept``: the trials of the kept model (one, or an ensemble's), starred.
+    ``kept``: the trials of the kept model (one, or an ensemble's), starred. ``usage``: the search's
+    :attr:`~nnfmu.study.time_search.TimeSearchResult.usage`, printed below the table.
     """
     kept = tuple(kept)
-    head = ("trial", "arch", "hidden", "lr", "noise", "window", "epochs", "valid NRMSE", "ASHA", "CPU-s", "end")
+    head = ("trial", "arch", "hidden", "lr", "noise", "window", "seed", "epochs", "valid NRMSE", "halved", "CPU-s",
+            "end")
     table = [head]
     for r in rows:
         table.append((f"{r['trial']}{'*' if r['trial'] in kept else ''}", r["arch"], str(r["hidden"]),
                       f"{r['lr']:g}", f"{r['feedback_noise']:g}", "whole" if r["truncate"] is None else
-                      str(r["truncate"]), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
+                      str(r["truncate"]), str(r.get("seed", "-")), str(r["epochs"]), _cell(r["best_valid_nrmse"], ".4f"),
                       "stopped" if r["stopped"] else "-", _cell(r["cpu_s"], ".1f"),
                       r["status"] if r["error"] is None else f"{r['status']}: {r['error']}"))
     widths = [max(len(row[j]) for row in table) for j in range(len(head) - 1)]
@@ -128,3 +114,10 @@ def print_table(rows: list, kept=()) -> None:
         print("* kept: the lowest validation free-run NRMSE")
     elif kept:
         print("* kept: their ensemble, chosen greedily on validation from the best trial on")
+    if usage:
+        waited = ("" if usage.get("waited_s") is None else
+                  f"; the workers spent {usage['workers_cpu_s'] - usage['cpu_s']:.0f} CPU-s besides (start, imports) "
+                  f"and waited {usage['waited_s']:.0f} s for a core other processes held")
+        load = "" if usage.get("load") is None else f" (machine load {usage['load']:.1f})"
+        print(f"CPU: the trials used {usage['cpu_s']:.0f} CPU-s of {usage['cores']} cores x {usage['wall_s']:.0f} s, "
+              f"{100 * usage['cpu_share']:.0f} %{waited}{load}")

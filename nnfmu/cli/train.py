@@ -59,10 +59,10 @@ _TRAIN_OPTIONS = (
      "into batches"),
     ("--seed", "seed", int, "random seed (default 0)"),
     ("--max-minutes", "max_minutes", float, "wall-clock budget in minutes (default: 10, with the step budget the "
-     "data give). Alone (without --epochs and --patience) it means: spend the budget on a small search (Ray Tune, "
-     "ASHA; architecture when --arch is left out, width, learning rate, feedback noise, window), keep the best on "
-     "validation and print the search as a table; without Ray installed, train until the budget is spent and keep "
-     "the best epoch. With --epochs the bar counts epochs"),
+     "data give). Alone (without --epochs and --patience) it means: spend the budget on a small search (one worker "
+     "a core, successive halving; architecture when --arch is left out, width, learning rate, feedback noise, "
+     "window; trial 0 is the plain training), keep the best on validation and print the search as a table. With "
+     "--epochs the bar counts epochs"),
     ("--feedback-noise", "feedback_noise", float,
      "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),

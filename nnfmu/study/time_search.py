@@ -1,66 +1,67 @@
 """``nnfmu train --max-minutes N`` without ``--epochs``: the budget spent on a small early-stopping search.
 
-:func:`search_for` trains the points of :mod:`nnfmu.study.time_space` (trial 0 the plain defaults) in a local
-Ray instance, one CPU and one torch thread per trial, as many at once as there are CPUs. Every trial is
-:func:`nnfmu.training.train` with its own ``max_minutes`` cap and reports its validation free-run NRMSE after
-every epoch; Ray Tune's ASHA scheduler stops the trials that trail the others at the same epoch (grace
-period: :data:`GRACE_STEPS` optimiser steps, at least 3 epochs). The whole search ends within the budget:
+:func:`search_for` trains the points of :mod:`nnfmu.study.time_space` (trial 0 the plain defaults) in one persistent
+worker process a core (:mod:`nnfmu.study.trial_pool`), one torch thread each: a core whose trial ended starts the
+next at once. Every trial is :func:`nnfmu.training.train` with the plain training's budget per seed (where the time
+alone was given: :data:`~nnfmu.training.plan.BUDGET_STEPS` optimiser steps, patience
+:data:`~nnfmu.training.plan.PATIENCE_STEPS` steps, at most :data:`~nnfmu.training.plan.DEFAULT_MINUTES`) and
+reports its validation free-run NRMSE after every epoch; asynchronous successive halving
+(:class:`~nnfmu.study.trial_pool.Halving`) stops the trials that trail the others at the same epoch (grace period:
+:data:`GRACE_STEPS` optimiser steps, at least 3 epochs). Trial 0, the defaults, is never stopped by it: it trains to
+its own stop as the plain training would, or to the search's end, so the search is never worse on validation than
+the defaults it starts from. The whole search ends within the budget:
 
-- the budget counts from the call, or from ``since`` (``nnfmu train``: from the command's start); Ray's start
-  (10-30 s on 2 busy cores) is part of it. :data:`END_RESERVE` of it (at least :data:`MIN_RESERVE_S`) is
-  kept for the last epochs to finish, Ray's shutdown and the copy of the best;
-- ``clamp(cpus * time left / TRIAL_MINUTES, cpus, MAX_TRIALS)`` trials are planned, each capped at
-  ``CAP_SHARE x`` its fair share of the time (ASHA ends most of them early), and never past the end;
-  a core whose trial ended takes the next point, of up to :data:`MAX_POINTS`, so that the budget is spent
-  when ASHA ends the trials faster than planned;
-- no trial starts once less than a quarter of a cap (or :data:`MIN_TRIAL_S`) is left; a trial stops after
-  an epoch when the next would end past the end; Tune's own time budget stops whatever still runs then.
+- the budget counts from the call, or from ``since`` (``nnfmu train``: from the command's start).
+  :data:`END_RESERVE` of it (at least :data:`MIN_RESERVE_S`) is kept for the workers' last epochs and the copy
+  of the kept model; before it, the time the ensemble selection and the test scores need (measured: the trials'
+  validation free runs times the runs the selection makes, at most :data:`SELECT_SHARE` of the budget);
+- a core whose trial ended takes the next point while at least :data:`MIN_TRIAL_S` is left; once every point has
+  started, one of the best points that trained to their own stop again, with the next seed
+  (:func:`~nnfmu.study.time_space.again`), trained to its own stop too; a trial stops after an epoch when the next
+  would end past the trials' end.
 
 The trials validate on the validation split only (the test split stays in the driver). The trial with the
 lowest best validation NRMSE kept in its checkpoint starts a greedy ensemble selection on validation
 (:func:`nnfmu.training.ensemble_select.select_ensemble`) over the :data:`MAX_CANDIDATES` best trials that
 improved on their start: another trial joins as a member of one model (the mean output fed back) only if it
-lowers the validation free-run NRMSE by 1 % or more, up to 4 members. :data:`SELECT_SHARE` of the budget is
-kept for it, ending early enough to score the kept model on the test split in time. The kept model (one
-trial's network, or the mixed ensemble of several), with its test scores added, is written atomically to
-``out``. Nothing is written to ``out`` unless a trial finished an epoch.
+lowers the validation free-run NRMSE by 1 % or more, up to 4 members. The kept model (one trial's network, or the
+mixed ensemble of several), with its test scores added, is written atomically to ``out``. Nothing is written to
+``out`` unless a trial finished an epoch. The result says how much of the CPU the trials used (their CPU seconds
+over cores x the search's wall time) and when its best validation score last fell.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import json
-import logging
 import math
 import os
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from unittest import mock
 
-from nnfmu.atomic import write_text_atomic
-from nnfmu.data import Dataset
-from nnfmu.errors import ConfigError, NnfmuError, TrainingError
-from nnfmu.study.ray_connect import ray_session, require_ray
-from nnfmu.study.time_space import trial_configs, trial_points
-from nnfmu.study.tune import METRIC, _finite
+from nnfmu.data import Dataset, save_dataset
+from nnfmu.errors import ConfigError
+from nnfmu.limits import UNBOUNDED_EPOCHS
+from nnfmu.study.time_space import again, label, trial_configs, trial_points
+from nnfmu.study.trial_pool import Halving, Trials, run_trials
 from nnfmu.training import TrainConfig
-from nnfmu.training.plan import PATIENCE_STEPS
+from nnfmu.training.ensemble_select import MAX_MEMBERS
+from nnfmu.training.plan import BUDGET_STEPS, DEFAULT_MINUTES, PATIENCE_STEPS
 from nnfmu.training.resources import usable_cores
 
-END_RESERVE = 0.05  # of the budget, at least MIN_RESERVE_S
-MIN_RESERVE_S = 5.0
-TRIAL_MINUTES = 0.5  # planned CPU-minutes per trial
-CAP_SHARE = 2.5
-MAX_TRIALS = 24  # planned: what sets each trial's cap
-MAX_POINTS = 4 * MAX_TRIALS  # run while time is left (the robot's 24 planned trials ended in 435 of its 600 s)
+END_RESERVE = 0.02  # of the budget, at least MIN_RESERVE_S
+MIN_RESERVE_S = 3.0
+MAX_POINTS = 1000  # the whole space, in practice (270 points at most)
 MIN_TRIAL_S = 5.0
 GRACE_STEPS = 20
-SELECT_SHARE = 0.1  # of the budget, kept for the ensemble selection after the trials
+SELECT_SHARE = 0.1  # of the budget, at most, kept for the ensemble selection after the trials
+MIN_SELECT_S = 2.0
+SELECT_SAFETY = 3.0  # an ensemble's free run is in torch, a trial's validation often compiled
 MAX_CANDIDATES = 6  # the best trials on validation that the selection tries
-THREAD_TIMEOUT_S = 60
+#: validation free runs of one member the selection makes at most: the best alone, then each round tries every
+#: candidate left as one more member of the ensemble so far
+SELECT_RUNS = 1 + sum((MAX_CANDIDATES - r) * (r + 1) for r in range(1, MAX_MEMBERS))
 
 
 @dataclass(frozen=True)
@@ -69,12 +70,16 @@ class TimeSearchResult:
 
     A row: ``trial``, the knobs (``arch``, ``hidden``, ``lr``, ``feedback_noise``, ``truncate``), ``epochs``
     (run), ``best_valid_nrmse`` (kept in its checkpoint; None if it never finished an epoch), ``stopped``
-    (by ASHA), ``cpu_s`` (CPU seconds of its worker), ``status`` (how it ended) and ``error``. ``best``: the
-    trial best on validation; ``members``: the trials of the kept model (``(best,)``, or the ensemble's, in the
-    order the selection added them) and ``member_scores`` the validation NRMSE after each addition;
-    ``best_valid_nrmse``: the kept model's. ``test`` and ``test_window``: the kept model's free-run test scores
-    (:class:`~nnfmu.metrics.NrmseResult` or None), as :class:`~nnfmu.training.TrainResult` has them;
+    (by successive halving), ``cpu_s`` (CPU seconds of its training), ``status`` (how it ended) and ``error``.
+    ``best``: the trial best on validation; ``members``: the trials of the kept model (``(best,)``, or the
+    ensemble's, in the order the selection added them) and ``member_scores`` the validation NRMSE after each
+    addition; ``best_valid_nrmse``: the kept model's. ``test`` and ``test_window``: the kept model's free-run test
+    scores (:class:`~nnfmu.metrics.NrmseResult` or None), as :class:`~nnfmu.training.TrainResult` has them;
     ``model_config`` and ``train_config``: the kept model's, as its checkpoint holds them (dicts).
+    ``usage``: ``cpu_s`` (the trials' CPU seconds), ``cores``, ``wall_s`` (from the call to the end),
+    ``cpu_share`` (``cpu_s / (cores * wall_s)``) and ``load`` (the machine's 5-minute load average at the end:
+    other work on the cores lowers the share); ``progress``: ``(minutes, trial, validation NRMSE)`` each time the
+    best trial so far improved, and ``stalled``: why it stopped improving early, or "".
     """
 
     rows: list = field(default_factory=list)
@@ -89,6 +94,9 @@ class TimeSearchResult:
     members: tuple = ()
     member_scores: tuple = ()
     selection: str = ""
+    usage: dict = field(default_factory=dict)
+    progress: tuple = ()
+    stalled: str = ""
 
 
 def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: TrainConfig, linear=None,
@@ -98,15 +106,15 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
 
     ``dataset`` has its validation split; ``model_config`` is the base network (its ``arch`` is trial 0's and is
     searched unless ``"arch"`` is in ``given``; None: a GRU on the linear path of ``linear``), ``train_config``
-    the planned training (``max_minutes`` is not used: ``minutes`` is the budget), ``linear`` the linear model
-    of the linear path (or None), ``given`` the names of the options the user gave (kept as given). Ctrl-C,
-    SIGTERM or an error during the search still writes the best finished trial to ``out``, then goes on.
+    the planned training (``max_minutes`` is not used: ``minutes`` is the budget; ``epochs`` at
+    :data:`~nnfmu.limits.UNBOUNDED_EPOCHS` and ``patience`` 0 mean the plain training's budget per seed), ``linear``
+    the linear model of the linear path (or None), ``given`` the names of the options the user gave (kept as given).
+    Ctrl-C, SIGTERM or an error during the search still writes the best finished trial to ``out``, then goes on.
     ``since``: the :func:`time.monotonic` time the budget counts from (default: now; the CLI passes its start).
+    ``cpus``: worker processes (default: the cores this process may use).
     """
-    started = time.monotonic() if since is None else since
-    _, tune = require_ray()
-    from nnfmu.study.time_ray import Asha, Echo, Points
-
+    called = time.monotonic()
+    started = called if since is None else since
     if dataset.valid is None:
         raise ConfigError("the time search needs a dataset with its validation split (carve it first)")
     if model_config is None:
@@ -117,74 +125,145 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     if not (isinstance(minutes, (int, float)) and minutes > 0):
         raise ConfigError(f"the search budget must be > 0 minutes, got {minutes!r}")
     cpus = max(1, int(cpus or usable_cores()))
-    out, given = Path(out), set(given)
-    reserve = max(MIN_RESERVE_S, END_RESERVE * 60.0 * minutes)
-    final = started + 60.0 * minutes
-    end = final - reserve - SELECT_SHARE * 60.0 * minutes
+    out, given, budget = Path(out), set(given), 60.0 * minutes
+    reserve = max(MIN_RESERVE_S, END_RESERVE * budget)
+    final = started + budget
     train_config = _resolved(dataset, train_config)
     trials_ds = dataset.replace(splits={k: v for k, v in dataset.splits.items() if k != "test"})
-    steps = _steps_per_epoch(trials_ds, train_config)
-    grace = max(3, math.ceil(GRACE_STEPS / steps))
-    if train_config.patience == 0:  # the budget alone: a trial that stalls ends, leaving its core to the next
-        train_config = train_config.replace(patience=max(2 * grace, math.ceil(PATIENCE_STEPS / steps)))
-    with tempfile.TemporaryDirectory(prefix="nnfmu-search-") as tmp, _quiet_ray(), ray_session(None, cpus, 0):
-        left = end - time.monotonic()
-        planned = min(MAX_TRIALS, max(cpus, cpus * left / (60.0 * TRIAL_MINUTES)))
-        cap = max(MIN_TRIAL_S, min(left, CAP_SHARE * cpus * left / planned))
-        # more points than planned: a core whose trial ended early takes the next, while time is left
-        points = trial_points(model_config, train_config, given, MAX_POINTS, seed,
-                              int(trials_ds.train.lengths.max()))
-        wall_end = time.time() + (end - time.monotonic())
-        job = {"points": points, "model_config": model_config.to_dict(), "train_config": train_config.to_dict(),
-               "given": sorted(given), "folder": tmp, "cap_s": cap, "end": wall_end}
-        scheduler = Asha(time_attr="epoch", max_t=10 ** 6, grace_period=grace, reduction_factor=2)
-        searcher = Points(len(points), end, max(MIN_TRIAL_S, cap / 4))
-        trainable = tune.with_resources(tune.with_parameters(_trial, dataset=trials_ds, linear=linear, job=job),
-                                        {"cpu": 1, "gpu": 0})
-        run_config = tune.RunConfig(name="nnfmu-time-search", verbose=0, storage_path=str(Path(tmp) / "ray"),
-                                    callbacks=[Echo(points, scheduler)] if progress else None)
-        tune_config = tune.TuneConfig(metric=METRIC, mode="min", scheduler=scheduler, search_alg=searcher,
-                                      num_samples=len(points), max_concurrent_trials=cpus, reuse_actors=False,
-                                      time_budget_s=max(1.0, end - time.monotonic() + reserve / 2))
+    grace = max(3, math.ceil(GRACE_STEPS / _steps_per_epoch(trials_ds, train_config)))
+    points = trial_points(model_config, train_config, given, MAX_POINTS, seed, int(trials_ds.train.lengths.max()))
+    test_runs = _test_runs(dataset, train_config, model_config.init_window)
+    jobs = _Jobs(points, model_config, train_config, given, trials_ds, grace)
+    trials, halving, run = jobs.trials, jobs.halving, jobs.run
+
+    def end() -> float:  # the trials' end: the selection's time measured on the trials' validation runs
+        return final - reserve - _select_seconds(trials, test_runs, budget)
+
+    with tempfile.TemporaryDirectory(prefix="nnfmu-search-") as tmp:
+        folder = Path(tmp)
+        data = save_dataset(dataset, folder / "dataset")  # a dataset folder holds a test split: the workers drop it
+        linear_file = None if linear is None else linear.save(folder / "linear.json")
         stopped_by = None
         try:
-            tune.Tuner(trainable, run_config=run_config, tune_config=tune_config).fit()
+            run_trials(jobs.job, data=data, folder=folder, linear=linear_file, cpus=cpus, end=end,
+                       min_left_s=MIN_TRIAL_S, halving=halving, trials=trials, on_done=jobs.echo if progress else None)
         except BaseException as exc:  # Ctrl-C, SIGTERM or a failure: the best finished trial is still kept
             stopped_by = exc
-        rows = [_row(i, p, Path(tmp), i in scheduler.stopped_points, scheduler.last.get(i, {}))
-                for i, p in enumerate(points) if i < searcher.next]
-        kept = _keep(rows, Path(tmp), dataset, out, None if stopped_by is not None else final - reserve / 2)
+        rows = [_row(i, run[i], folder, trials.records.get(i, {}), i in halving.stopped)
+                for i in range(trials.started)]
+        kept = _keep(rows, folder, dataset, out, None if stopped_by is not None else final - reserve / 2)
         if stopped_by is not None:
             if kept is not None:
                 print(f"search stopped ({type(stopped_by).__name__}): the best trial so far, {kept.best}, "
                       f"validation free-run NRMSE {kept.best_valid_nrmse:.4f}, is kept in {out}", flush=True)
             raise stopped_by
     seconds = time.monotonic() - started
+    usage = _usage(rows, cpus, time.monotonic() - called, trials)
+    found = tuple((t / 60.0, i, v) for t, i, v in trials.best)
+    extra = dict(rows=rows, seconds=seconds, usage=usage, progress=found,
+                 stalled=_stalled(found, rows, len(points), (end() - called) / 60.0))
     if kept is None:
-        return TimeSearchResult(rows, seconds=seconds)
-    return dataclasses.replace(kept, rows=rows, seconds=seconds)
+        return TimeSearchResult(**extra)
+    return dataclasses.replace(kept, **extra)
 
 
-@contextlib.contextmanager
-def _quiet_ray():
-    """Ray's own tables and INFO lines off (the search prints one line per trial, and its table); Ctrl-C raises."""
-    loggers = {logging.getLogger(name): level for name, level in
-               (("ray", logging.WARNING), ("ray.tune", logging.ERROR), ("ray.train", logging.ERROR))}
-    levels = [lg.level for lg in loggers]
-    for lg, level in loggers.items():
-        lg.setLevel(level)
-    try:
-        # Ctrl-C raises KeyboardInterrupt here (Ray Tune's own handler would end the search quietly); a worker
-        # whose trial ASHA stopped waits for it to write its checkpoint (default 2 s); the workers inherit this
-        # environment. Every trial gets a fresh worker (reuse_actors=False): with Ray 2.60 a reused worker whose
-        # stopped trial had not ended failed ("reuse requires reset_config()") and its next trial then held the
-        # core, with no epoch, until the search's time was up (2 of the robot's 5 trials)
-        with mock.patch.dict(os.environ, {"RAY_AIR_NEW_OUTPUT": "0", "TUNE_DISABLE_SIGINT_HANDLER": "1",
-                                          "TUNE_FUNCTION_THREAD_TIMEOUT_S": str(THREAD_TIMEOUT_S)}):
-            yield
-    finally:
-        for lg, level in zip(loggers, levels):
-            lg.setLevel(level)
+class _Jobs:
+    """The trials' jobs: the space's points in order (the training's seed), then :func:`again`'s further seeds.
+
+    ``run``: the point of every trial handed out so far, with its ``seed``; ``trials`` and ``halving``: what the
+    workers reported and what successive halving stopped."""
+
+    def __init__(self, points: list, model_config, train_config: TrainConfig, given: set, dataset: Dataset,
+                 grace: int):
+        self.points, self.model_config, self.train_config, self.given = points, model_config, train_config, given
+        self.dataset, self.grace = dataset, grace
+        self.run, self.trials, self.halving = [], Trials(), Halving(grace)
+
+    def job(self, i: int) -> dict | None:
+        """Trial ``i``'s job for a worker; None while every point has started and none trained to its own stop."""
+        point = ({**self.points[i], "seed": self.train_config.seed} if i < len(self.points) else
+                 again(self.run, self.trials.scores, self.halving.stopped, MAX_CANDIDATES))
+        if point is None:
+            return None
+        if i >= len(self.points):  # a point that trained to its own stop, with another seed: it does so too
+            self.halving.exempt.add(i)
+        self.run.append(point)
+        mc, tc = trial_configs(point, self.model_config, self.train_config, self.given)
+        tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(self.dataset, tc), self.grace)
+        return {"trial": i, "model_config": mc.to_dict(), "train_config": tc.to_dict()}
+
+    def echo(self, i: int, record: dict) -> None:
+        """One printed line as trial ``i`` ends."""
+        score = record.get("last", {}).get("best_valid_nrmse")
+        text = "no epoch finished" if score is None else (f"best validation NRMSE {score:.4f} after "
+                                                          f"{record['last']['epoch']} epochs")
+        stopped = ", stopped by successive halving" if i in self.halving.stopped else ""
+        print(f"search: trial {i} {label(self.run[i])}: {text}{stopped}", flush=True)
+
+
+def _budgeted(cfg: TrainConfig, steps: int, grace: int) -> TrainConfig:
+    """``cfg`` with the plain training's budget per seed where the time alone was the budget (module docstring).
+
+    ``steps``: optimiser steps an epoch of this trial; the patience is at least two grace periods, so that a trial
+    that successive halving keeps is not ended by its patience first."""
+    changes = {"max_minutes": DEFAULT_MINUTES if cfg.max_minutes is None else min(cfg.max_minutes, DEFAULT_MINUTES)}
+    if cfg.epochs >= UNBOUNDED_EPOCHS:
+        changes["epochs"] = max(1, math.ceil(BUDGET_STEPS / steps))
+    if cfg.patience == 0:
+        changes["patience"] = max(2 * grace, math.ceil(PATIENCE_STEPS / steps))
+    return cfg.replace(**changes)
+
+
+def _test_runs(dataset: Dataset, cfg: TrainConfig, init_window: int) -> float:
+    """The kept model's test scores in validation free runs of one member: float64 (about twice the cost), a second
+    run after the init window, up to :data:`MAX_MEMBERS` members."""
+    from nnfmu.training.horizons import validation_trajectories
+
+    if "test" not in dataset.splits:
+        return 0.0
+    valid, _ = validation_trajectories(dataset, cfg)
+    return MAX_MEMBERS * 2.0 * (2 if init_window > 1 else 1) * dataset.test.n_samples / valid.n_samples
+
+
+def _select_seconds(trials: Trials, test_runs: float, budget: float) -> float:
+    """The seconds kept for the selection and the test scores: measured on the validation free runs of the
+    :data:`MAX_CANDIDATES` best trials so far, or :data:`SELECT_SHARE` of the budget before any epoch."""
+    if not trials.valid_s:
+        return SELECT_SHARE * budget
+    best = sorted(trials.scores, key=trials.scores.get)[:MAX_CANDIDATES]
+    one = max(trials.valid_s[i] for i in best)
+    return min(SELECT_SHARE * budget, max(MIN_SELECT_S, SELECT_SAFETY * one * (SELECT_RUNS + test_runs)))
+
+
+def _usage(rows: list, cores: int, wall_s: float, trials: Trials) -> dict:
+    """How much of the CPU the trials used: their CPU seconds over ``cores * wall_s``, and what else held the cores.
+
+    ``workers_cpu_s``: the workers' whole CPU time (the trials', their start and imports); ``waited_s``: the
+    seconds the workers were ready to run while other processes held the cores; ``trials_s``: the seconds the
+    trials ran (the rest of ``wall_s``: the selection and the test scores); ``load``: the 5-minute load average."""
+    cpu = float(sum(r["cpu_s"] or 0.0 for r in rows))
+    load = os.getloadavg()[1] if hasattr(os, "getloadavg") else None
+    workers = list(trials.workers.values())
+    return {"cpu_s": cpu, "cores": cores, "wall_s": wall_s, "cpu_share": cpu / (cores * max(wall_s, 1e-9)),
+            "trials_s": trials.seconds, "workers_cpu_s": sum(c for c, _ in workers) if workers else None,
+            "waited_s": sum(w for _, w in workers) if workers else None, "load": load}
+
+
+def _stalled(found: tuple, rows: list, n_points: int, trial_minutes: float) -> str:
+    """Why the best validation score stopped falling in the first half of the trials' time, or "" if it did not."""
+    if not found or found[-1][0] >= 0.5 * trial_minutes:
+        return ""
+    after = [r for r in rows if r["trial"] > found[-1][1]]
+    halved = sum(r["stopped"] for r in after)
+    if not after:
+        return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: the trials "
+                "still training then did not improve on it, and no later trial started")
+    seeds = max(0, len(rows) - n_points)
+    tried = f"every one of the space's {n_points} points was tried and " if seeds else ""
+    more = f", {seeds} of them the best points again with further seeds" if seeds else ""
+    return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: {tried}none "
+            f"of the {len(after)} trials after trial {found[-1][1]} beat it on validation ({halved} stopped by "
+            f"successive halving{more})")
 
 
 def _resolved(dataset: Dataset, cfg: TrainConfig) -> TrainConfig:
@@ -203,55 +282,15 @@ def _steps_per_epoch(ds: Dataset, cfg: TrainConfig) -> int:
     return max(1, math.ceil(max(pieces, 1) / cfg.batch_size))
 
 
-def _trial(config: dict, dataset: Dataset | None = None, linear=None, job: dict | None = None) -> None:
-    """One trial (in a Ray worker): train the point until its cap, the end of the search, or ASHA stops it."""
-    from ray import tune
-
-    from nnfmu.models import ModelConfig
-    from nnfmu.training import StopTraining, train
-
-    i, folder = int(config["trial"]), Path(job["folder"])
-    seconds = min(job["cap_s"], job["end"] - time.time())
-    row = {"status": "not started: the search's time was up", "error": None, "cpu_s": 0.0}
-    if seconds >= 1.0:
-        model_config, train_config = trial_configs(job["points"][i], ModelConfig.from_dict(job["model_config"]),
-                                                   TrainConfig.from_dict(job["train_config"]), set(job["given"]))
-        train_config = train_config.replace(max_minutes=seconds / 60.0)
-        cpu0, stopped = time.process_time(), []
-
-        def report(epoch: int, metrics: dict) -> None:
-            try:
-                tune.report({"epoch": epoch, "valid_nrmse": _finite(metrics["valid_nrmse"]),
-                             METRIC: _finite(metrics["best_valid_nrmse"]), "cpu_s": time.process_time() - cpu0})
-            except SystemExit:  # Ray stops this trial: keep what it has, in its checkpoint
-                stopped.append(epoch)
-                raise StopTraining from None
-            if time.time() + metrics["seconds"] > job["end"]:  # another epoch would end past the search's end
-                raise StopTraining
-
-        try:
-            result = train(dataset, model_config, train_config, out=folder / f"trial-{i}.pt", callback=report,
-                           device="cpu", threads=1, linear=linear)
-            row["status"] = ("stopped by Ray" if stopped else "time-budget" if result.stop_reason == "callback"
-                             else result.stop_reason)
-        except TrainingError as exc:  # a diverging point is a bad score, not a failed search
-            row.update(status="diverged", error=str(exc).split(";")[0])
-        except NnfmuError as exc:
-            row.update(status="failed", error=str(exc))
-        row["cpu_s"] = time.process_time() - cpu0
-    write_text_atomic(folder / f"trial-{i}.json", json.dumps(row))  # a worker ended mid-write leaves no half record
-
-
-def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
-    """The table row of trial ``i``: its knobs, and what its checkpoint, its own record and its ``last`` report say."""
+def _row(i: int, point: dict, folder: Path, record: dict, stopped: bool) -> dict:
+    """The table row of trial ``i``: its knobs, and what its checkpoint and its worker's ``record`` say (an empty
+    record: the search was stopped before the trial ended)."""
     from nnfmu.errors import CheckpointError
     from nnfmu.models import load_checkpoint
 
-    row = {"trial": i, **point, "epochs": 0, "best_valid_nrmse": None, "stopped": stopped, "cpu_s": last.get("cpu_s"),
-           "status": "ended by Ray before it finished (the search's time was up)", "error": None}
-    record = folder / f"trial-{i}.json"
-    with contextlib.suppress(OSError, ValueError):  # none, or unreadable: the row says Ray ended the trial
-        row.update(json.loads(record.read_text()))
+    cpu = record.get("cpu_s", record.get("last", {}).get("cpu_s"))
+    row = {"trial": i, **point, "epochs": 0, "best_valid_nrmse": None, "stopped": stopped, "cpu_s": cpu,
+           "status": record.get("status", "ended when the search was stopped"), "error": record.get("error")}
     ckpt = folder / f"trial-{i}.pt"
     try:
         summary = load_checkpoint(ckpt)["summary"] if ckpt.is_file() else {}
@@ -260,8 +299,8 @@ def _row(i: int, point: dict, folder: Path, stopped: bool, last: dict) -> dict:
     if summary.get("epochs_run", 0) >= 1 and math.isfinite(summary["best_valid_nrmse"]):
         row.update(epochs=int(summary["epochs_run"]), best_valid_nrmse=float(summary["best_valid_nrmse"]))
     if stopped:
-        row["status"] = "stopped by ASHA"
-    elif row["status"] == "stopped by Ray":
+        row["status"] = "stopped by successive halving"
+    elif row["status"] == "stopped":
         row["status"] = "stopped: the search's time was up"
     return row
 

@@ -11,7 +11,8 @@ take these values:
 
 Trial 0 is the plain training at the defaults (the given architecture, hidden 32, lr 3e-3, no noise, the
 planned window), so the search keeps it unless something beats it on validation. The next trials take the
-architectures in turn, with the other knobs drawn at random (seeded) and no point twice.
+architectures in turn, with the other knobs drawn at random (seeded) and no point twice. Once every point has
+started, the best points train again with further seeds (:func:`again`).
 """
 
 from __future__ import annotations
@@ -115,8 +116,32 @@ def _plain(v):
     return v.item() if isinstance(v, np.generic) else v
 
 
+def again(run: list, scores: dict, halved: set, keep: int) -> dict | None:
+    """The point to train once more, with the next seed, once every point of the space has started.
+
+    ``run``: the points of the trials so far (with their ``seed``), ``scores``: trial -> its best validation NRMSE,
+    ``halved``: the trials successive halving stopped. Among the ``keep`` points best on validation (a point's
+    score: its best trial's) that trained to their own stop, the one with the fewest seeds so far (the better first)
+    gets the next seed: further seeds of the best points give the ensemble selection members that differ by their
+    seed alone (the search trains them to their own stop, as it does trial 0). None while no point qualifies.
+    """
+    best, seeds = {}, {}
+    for i, point in enumerate(run):
+        key = _key(point)
+        seeds[key] = max(seeds.get(key, point["seed"]), point["seed"])
+        if i in scores and i not in halved:
+            best[key] = min(best.get(key, math.inf), scores[i])
+    top = sorted(best, key=best.get)[:keep]
+    if not top:
+        return None
+    counts = {key: sum(_key(p) == key for p in run) for key in top}
+    key = min(top, key=lambda k: (counts[k], best[k]))
+    return {**dict(zip(KNOBS, key)), "seed": seeds[key] + 1}
+
+
 def label(point: dict) -> str:
-    """A short text of a point, e.g. ``gru h32 lr 0.003 noise 0 T 400``."""
+    """A short text of a point, e.g. ``gru h32 lr 0.003 noise 0 T 400`` (`` seed 2`` where it has one)."""
     window = "whole" if point["truncate"] is None else point["truncate"]
+    seed = f" seed {point['seed']}" if "seed" in point else ""
     return (f"{point['arch']} h{point['hidden']} lr {point['lr']:g} noise {point['feedback_noise']:g} "
-            f"T {window}")
+            f"T {window}{seed}")
