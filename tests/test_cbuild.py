@@ -20,7 +20,8 @@ from nnfmu.errors import FmuBuildError
 
 PACKAGE = Path(nnfmu.__file__).parent
 #: Modules that start processes other than the C compiler, with what they start.
-OTHER_PROCESSES = {"training/ensemble.py": "nnfmu train, one process per ensemble member"}
+OTHER_PROCESSES = {"training/ensemble.py": "nnfmu train, one process per ensemble member",
+                   "study/trial_pool.py": "nnfmu train --max-minutes, one worker process per core"}
 
 
 def _process_calls(tree: ast.AST) -> list[int]:
