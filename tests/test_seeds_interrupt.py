@@ -22,14 +22,30 @@ def test_a_seed_worker_stopped_before_its_training_began_ends_quietly_with_130(t
             str(tmp_path / "seed-0.pt"), "cpu", "1", "1", str(fifo)]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    time.sleep(1.0)  # past the interpreter's start, so that Python's own SIGINT handler is in place
+    writer = _when_read(fifo, proc)  # the worker has opened it: past its imports, with Python's SIGINT handler
     proc.send_signal(signal.SIGINT)
     try:
         out, err = proc.communicate(timeout=120)
     finally:
         proc.kill()
+        os.close(writer)
     assert proc.returncode == 130 and err == "" and out == ""
     assert not (tmp_path / "seed-0.pt").exists()
+
+
+def _when_read(fifo, proc, limit_s: float = 120.0) -> int:
+    """A write end of ``fifo`` once ``proc`` has it open for reading (it then blocks reading, as nothing is written).
+
+    Opening the write end without blocking fails (ENXIO) until a reader has the FIFO open, so this waits for the
+    worker itself, not for a guess at how long its start takes on a busy machine."""
+    deadline = time.monotonic() + limit_s
+    while True:
+        try:
+            return os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise
+            time.sleep(0.02)
 
 
 @pytest.fixture
