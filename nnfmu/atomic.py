@@ -65,6 +65,12 @@ _SPECIAL = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", 
             stat.S_IFSOCK: "a socket"}
 
 
+def through_link(path: str | os.PathLike) -> Path:
+    """``path``, or where it points if it is a symbolic link: a write lands there and the link stays a link."""
+    path = Path(path)
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
 def resolve_target(path: str | os.PathLike) -> Path:
     """Where a write of ``path`` lands: the file a symbolic link points to, or ``path`` itself.
 
@@ -72,7 +78,7 @@ def resolve_target(path: str | os.PathLike) -> Path:
     destroy it (``/dev/full`` becoming a regular file, for root), and writing into one is not a file's write.
     """
     path = Path(path)
-    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    target = through_link(path)
     try:
         kind = _SPECIAL.get(stat.S_IFMT(target.stat().st_mode))
     except OSError:

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nnfmu.atomic import describe_os_error
+from nnfmu.atomic import describe_os_error, through_link
 from nnfmu.data.dataset import SPLIT_NAMES, Dataset, Trajectories, _check_split
 from nnfmu.errors import DataError, DataFileError, ShapeError
 
@@ -43,7 +43,7 @@ def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = Fals
     folder. A dataset without a ``test`` split is refused (:class:`DataError`):
     every model is scored on it.
     """
-    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
+    path = through_link(path)
     if "test" not in ds.splits:
         raise DataError(f"the dataset has no 'test' split (it has {', '.join(ds.splits)}), so nothing could be "
                         f"scored on {path}; add held-out test data: from_arrays(u_test=..., y_test=...), "
@@ -85,7 +85,7 @@ def check_replaceable(path: str | os.PathLike) -> None:
     (a file, a folder of the user's own work) is named in the message and never replaced, even with
     ``--force``.
     """
-    path = Path(os.path.realpath(path)) if Path(path).is_symlink() else Path(path)
+    path = through_link(path)
     if not path.exists():
         return
     if not path.is_dir():
