@@ -49,6 +49,17 @@ def test_trial_zero_is_the_plain_training_and_the_rest_take_the_architectures_in
     assert {p["truncate"] for p in trial_points(model, train, set(), 30, 0, longest=500)} == {200, 400}  # fits
 
 
+def test_an_architecture_that_feeds_back_no_output_is_searched_without_feedback_noise():
+    # the ss network refuses feedback noise; drawn from the base GRU's noises, its trials ended before an epoch
+    from nnfmu.models import architectures
+
+    model, train = ModelConfig(arch="gru", n_u=2, n_y=1), TrainConfig(truncate=400)
+    points = trial_points(model, train, set(), 60, seed=0, longest=5000)
+    refusing = [p for p in points if not architectures.model_class(p["arch"]).takes_feedback_noise]
+    assert refusing and all(p["feedback_noise"] == 0.0 for p in refusing)
+    assert any(p["feedback_noise"] > 0 for p in points)  # the others still search it
+
+
 def test_the_options_given_stay_fixed_in_every_trial():
     model = ModelConfig(arch="tcn", n_u=2, n_y=1, hidden=8, layers=2, linear_order=3)
     train = TrainConfig(lr=0.02, truncate=300, feedback_noise=0.3)

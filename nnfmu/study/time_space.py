@@ -72,6 +72,8 @@ def trial_points(model_config: ModelConfig, train_config: TrainConfig, given, n:
         arch = space["arch"][k % len(space["arch"])]
         for _ in range(50):  # a fresh point of this architecture, if it has one left
             point = {"arch": arch, **{name: space[name][rng.integers(len(space[name]))] for name in KNOBS[1:]}}
+            if "feedback_noise" not in given and not architectures.model_class(arch).takes_feedback_noise:
+                point["feedback_noise"] = 0.0  # searched for the base architecture; this one refuses any
             if _key(point) not in seen:
                 points.append(point)
                 seen.add(_key(point))

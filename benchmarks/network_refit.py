@@ -1,0 +1,117 @@
+"""Issue 38: would a final refit of a network on training + validation data, for the chosen number of steps, help?
+
+``nnfmu train`` stops on its validation split and keeps the best epoch's weights; the validation data never
+trains the network. A refit would train the same network once more, from the same seed, on the training and the
+validation data together, for the number of epochs (optimiser steps) the first run chose, and keep those final
+weights. Whether that helps must be decided without the test split, so this script plays the choice one level
+down, as ``benchmarks/linear_refit.py`` does for the linear model:
+
+- the dataset's validation split (its own, or the tail ``nnfmu train`` cuts from one record) stands in for the test;
+- an inner validation is carved from the training split the way ``nnfmu train`` carves it (the plan's tail);
+- run A trains the architecture at its planned defaults (linear path, windows, batch, step budget) and keeps its
+  best epoch on the inner validation; run B trains from the same seed on the whole training split for exactly the
+  epochs run A kept, and keeps its final weights;
+- both are scored on the outer validation (free run from y0, float64). The test split is not read.
+
+One seed per run, ``--seeds`` repeats it (seeds 0, 1, ...). The time budget of run A is ``--minutes`` (the plan's
+step budget binds first on small data); run B has no time budget, its epochs bind. Not part of the tests.
+
+    python benchmarks/network_refit.py data/slider data/valve --arch gru --seeds 2 --minutes 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nnfmu.data import load_dataset
+from nnfmu.linear import LinearConfig, identify_linear
+from nnfmu.metrics import nrmse
+from nnfmu.models import architectures
+from nnfmu.training import TrainConfig, train
+from nnfmu.training.plan import plan_training, valid_fraction
+from nnfmu.training.session import StopTraining
+from nnfmu.training.trainer import _new_model, prepare_dataset
+
+
+def outer_split(ds):
+    """``(dataset whose 'valid' split stands in for the test, without a test split)``: its own, or the tail."""
+    if ds.valid is None:
+        frac = valid_fraction(ds) if ds.train.n_traj == 1 else 0.1
+        ds = ds.with_validation(frac)
+    return ds.replace(splits={k: v for k, v in ds.splits.items() if k != "test"})
+
+
+def inner_plan(inner, arch: str, seed: int, minutes: float):
+    """The defaults ``nnfmu train --arch arch`` plans for ``inner`` (no valid split): carved dataset, configs."""
+    record = architectures.architecture(arch)
+    cfg = TrainConfig(strategy=record.strategies[0], dtype=record.dtype, seed=seed)
+    if (frac := valid_fraction(inner)) is not None:
+        cfg = cfg.replace(valid_fraction=frac)
+    carved, _ = prepare_dataset(inner, cfg)
+    whole = inner.train if inner.train.n_traj == 1 else None
+    linear = identify_linear(carved, LinearConfig(), refit_on=whole)
+    model_config = record.get("config_class")(arch=arch, n_u=inner.n_u, n_y=inner.n_y, linear_order=linear.n_x)
+    plan = plan_training(inner, {"valid_fraction": cfg.valid_fraction}, linear=linear)
+    cfg = cfg.replace(**{**plan.changes, "max_minutes": minutes})
+    return carved, model_config, cfg, linear
+
+
+def refit(carved, inner, model_config, cfg, linear, epochs: int):
+    """Run B: the same network from the same seed on the whole training split for ``epochs``; its final weights.
+
+    train() needs a validation split to log; it gets a copy of the last training trajectory (in-sample, never used
+    to choose: the weights are taken after epoch ``epochs`` whatever it says).
+    """
+    whole = inner.replace(splits={**inner.splits, "valid": inner.train.subset([inner.train.n_traj - 1])})
+    model = _new_model(model_config, whole, cfg, linear)  # the linear start was refitted on all of it already
+    kept = {}
+
+    def at_epoch(epoch, _metrics):
+        if epoch >= epochs:
+            kept["state"] = copy.deepcopy(model.state_dict())
+            raise StopTraining
+
+    train(whole, model, cfg.replace(epochs=max(epochs, 1), patience=0, max_minutes=None), callback=at_epoch,
+          device="cpu")
+    model.load_state_dict(kept["state"])
+    return model.eval()
+
+
+def outer_score(model, split) -> float:
+    return nrmse(list(split.y), [model.simulate(u, y[0]) for u, y in zip(split.u, split.y)]).mean
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("datasets", nargs="+", type=Path)
+    p.add_argument("--arch", default="gru")
+    p.add_argument("--seeds", type=int, default=2)
+    p.add_argument("--minutes", type=float, default=5.0, help="time budget of run A (default 5)")
+    args = p.parse_args()
+    print("| dataset | seed | epochs kept | outer validation, no refit | outer validation, refit | CPU s |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for path in args.datasets:
+        outer = outer_split(load_dataset(path))
+        inner = outer.replace(splits={k: v for k, v in outer.splits.items() if k != "valid"})
+        wins = []
+        for seed in range(args.seeds):
+            t0 = time.process_time()
+            carved, model_config, cfg, linear = inner_plan(inner, args.arch, seed, args.minutes)
+            first = train(carved, model_config, cfg, linear=linear, device="cpu")
+            plain = outer_score(first.model, outer.valid)
+            second = refit(carved, inner, model_config, cfg, linear, first.best_epoch)
+            again = outer_score(second, outer.valid)
+            wins.append(again < plain)
+            print(f"| {path.name} | {seed} | {first.best_epoch} | {plain:.4f} | {again:.4f} | "
+                  f"{time.process_time() - t0:.0f} |", flush=True)
+        print(f"{path.name}: the refit is better on the outer validation for {int(np.sum(wins))} of {len(wins)} "
+              "seeds", flush=True)
+
+
+if __name__ == "__main__":
+    main()
