@@ -11,9 +11,22 @@ import textwrap
 from pathlib import Path
 
 
+def physics_names() -> tuple[str, ...]:
+    """The registered physics models (imported on first use: the registry pulls in CasADi)."""
+    from nnfmu.physics import physics_names as names
+
+    return names()
+
+
+def study_names() -> tuple[str, ...]:
+    """The studies ``nnfmu reproduce`` and ``nnfmu tune --system`` take, from the physics registry."""
+    from nnfmu.physics import study_names as names
+
+    return names()
+
+
 def is_physics(path: str) -> bool:
     """Whether ``nnfmu info`` should read ``path`` as a physics model (a file spec or a registered name)."""
-    from nnfmu.physics import physics_names
     from nnfmu.physics.model_file import is_file_spec
 
     return is_file_spec(path) or (not Path(path).exists() and path in physics_names())
