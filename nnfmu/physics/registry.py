@@ -13,6 +13,7 @@ need, so that no other module lists the models by name.
 
 from __future__ import annotations
 
+import importlib
 import os
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -144,8 +145,37 @@ def register_physics(entry: PhysicsEntry) -> None:
     _ENTRIES[entry.name] = entry
 
 
+#: Entry-point group of installed packages that register physics models (``[project.entry-points]``).
+ENTRY_POINT_GROUP = "nnfmu.physics"
+#: Modules to import (comma-separated) that register models or architectures: the same variable as
+#: :data:`nnfmu.models.architectures.PLUGINS_ENV`, so that one plug-in module can register both.
+PLUGINS_ENV = "NNFMU_PLUGINS"
+_loaded: set[str] = set()
+
+
+def _plugin_modules() -> list[str]:
+    from importlib.metadata import entry_points
+
+    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
+    return [ep.value.split(":")[0] for ep in entry_points(group=ENTRY_POINT_GROUP)] + [m for m in listed if m]
+
+
 def _builtins() -> None:
+    """The built-in models, then every plug-in module not imported yet (each tried once; they register
+    themselves). ConfigError names the plug-ins that cannot be imported."""
     import nnfmu.physics  # noqa: F401  (the built-in models register themselves on import)
+
+    failed = []
+    for module in _plugin_modules():
+        if module not in _loaded:
+            _loaded.add(module)
+            try:
+                importlib.import_module(module)
+            except ImportError as exc:
+                failed.append(f"{module!r} ({exc})")
+    if failed:
+        raise ConfigError(f"cannot import the plug-in {', '.join(failed)}; install it, put its folder on "
+                          f"PYTHONPATH, or drop it from {PLUGINS_ENV}")
 
 
 def physics_names() -> tuple[str, ...]:

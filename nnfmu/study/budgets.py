@@ -238,9 +238,9 @@ BUDGETS: Mapping[str, Mapping[str, Budget]] = MappingProxyType({name: _study_bud
 
 
 def get_budget(system: str, name: str) -> Budget:
-    """``BUDGETS[system][name]`` with an error listing the valid choices."""
-    if system not in BUDGETS:
-        raise ConfigError(f"unknown system {system!r}; choose one of {', '.join(BUDGETS)}")
-    if name not in BUDGETS[system]:
-        raise ConfigError(f"unknown budget {name!r} for the {system}; choose one of {', '.join(BUDGETS[system])}")
-    return BUDGETS[system][name]
+    """``BUDGETS[system][name]`` with an error listing the valid choices; a study registered after this module
+    was imported (a plug-in's) gets its budgets built here."""
+    budgets = BUDGETS.get(system) or _study_budgets(system)  # ConfigError listing the studies if there is none
+    if name not in budgets:
+        raise ConfigError(f"unknown budget {name!r} for the {system}; choose one of {', '.join(budgets)}")
+    return budgets[name]
