@@ -7,6 +7,7 @@ whether it returns a model; docs/own-physics.md).
 from __future__ import annotations
 
 import dataclasses
+import sys
 import textwrap
 from pathlib import Path
 
@@ -15,14 +16,25 @@ def physics_names() -> tuple[str, ...]:
     """The registered physics models (imported on first use: the registry pulls in CasADi)."""
     from nnfmu.physics import physics_names as names
 
-    return names()
+    return _without_broken_plugins(names)
 
 
 def study_names() -> tuple[str, ...]:
     """The studies ``nnfmu reproduce`` and ``nnfmu tune --system`` take, from the physics registry."""
     from nnfmu.physics import study_names as names
 
-    return names()
+    return _without_broken_plugins(names)
+
+
+def _without_broken_plugins(names) -> tuple[str, ...]:
+    """A plug-in that cannot be imported must not break every command: say so, and go on without it."""
+    from nnfmu.errors import ConfigError
+
+    try:
+        return names()
+    except ConfigError as exc:
+        print(f"nnfmu: warning: {exc}", file=sys.stderr)
+        return names(plugins=False)
 
 
 def is_physics(path: str) -> bool:

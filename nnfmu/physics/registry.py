@@ -161,10 +161,12 @@ def _plugin_modules() -> list[str]:
 
 
 def _builtins() -> None:
-    """The built-in models, then every plug-in module not imported yet (each tried once; they register
-    themselves). ConfigError names the plug-ins that cannot be imported."""
     import nnfmu.physics  # noqa: F401  (the built-in models register themselves on import)
 
+
+def _plugins() -> None:
+    """Import every plug-in module not imported yet (each tried once; they register themselves).
+    ConfigError names the plug-ins that cannot be imported."""
     failed = []
     for module in _plugin_modules():
         if module not in _loaded:
@@ -178,35 +180,49 @@ def _builtins() -> None:
                           f"PYTHONPATH, or drop it from {PLUGINS_ENV}")
 
 
-def physics_names() -> tuple[str, ...]:
-    """The registered physics models' names, sorted."""
+def physics_names(*, plugins: bool = True) -> tuple[str, ...]:
+    """The registered physics models' names, sorted; ``plugins=False``: without importing the plug-ins first."""
     _builtins()
+    if plugins:
+        _plugins()
     return tuple(sorted(_ENTRIES))
 
 
 def physics_entry(name: str) -> PhysicsEntry:
-    """The registered entry called ``name`` (ConfigError naming the choices when there is none)."""
+    """The registered entry called ``name`` (the plug-ins imported first when it is unknown; ConfigError naming
+    the choices when there is none)."""
     _builtins()
+    if name not in _ENTRIES:
+        _plugins()
     if name not in _ENTRIES:
         raise ConfigError(f"unknown physics model {name!r}; choose one of {', '.join(sorted(_ENTRIES))}")
     return _ENTRIES[name]
 
 
-def study_names() -> tuple[str, ...]:
-    """The names ``nnfmu reproduce`` takes: every registered entry's studies, sorted."""
+def study_names(*, plugins: bool = True) -> tuple[str, ...]:
+    """The names ``nnfmu reproduce`` takes: every registered entry's studies, sorted; ``plugins=False``: without
+    importing the plug-ins first."""
     _builtins()
+    if plugins:
+        _plugins()
     return tuple(sorted(s.name for e in _ENTRIES.values() for s in e.studies))
 
 
+def _find_study(name: str) -> tuple[PhysicsEntry, StudyPreset] | None:
+    return next(((e, s) for e in _ENTRIES.values() for s in e.studies if s.name == name), None)
+
+
 def study_preset(name: str) -> tuple[PhysicsEntry, StudyPreset]:
-    """The entry whose model a study ``name`` compares with, and the study's preset (ConfigError listing
-    the choices when there is none)."""
+    """The entry whose model a study ``name`` compares with, and the study's preset (the plug-ins imported first
+    when it is unknown; ConfigError listing the choices when there is none)."""
     _builtins()
-    for entry in _ENTRIES.values():
-        for study in entry.studies:
-            if study.name == name:
-                return entry, study
-    raise ConfigError(f"unknown system {name!r}; choose one of {', '.join(study_names())}")
+    found = _find_study(name)
+    if found is None:
+        _plugins()
+        found = _find_study(name)
+    if found is None:
+        raise ConfigError(f"unknown system {name!r}; choose one of {', '.join(study_names(plugins=False))}")
+    return found
 
 
 def resolve_physics(spec: str | PhysicsSystem) -> PhysicsSystem:
