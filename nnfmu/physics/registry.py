@@ -80,6 +80,11 @@ class StudyPreset:
     whole_record: bool = False
 
     def __post_init__(self) -> None:
+        try:
+            self.note.format(noise_floor="")
+        except (KeyError, IndexError, ValueError) as exc:
+            raise ConfigError(f"study {self.name!r}: its note may hold {{noise_floor}} and no other braces "
+                              f"({exc!r}); write other braces doubled, {{{{ and }}}}") from None
         for name in ("linear_quick", "linear_paper"):
             object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
 
@@ -127,6 +132,10 @@ class PhysicsEntry:
         if self.generate is None and not set(self.sizes) <= set(MODEL_SIZES):
             raise ConfigError(f"physics model {self.name!r}: without a generator of its own its sizes are "
                               f"{', '.join(MODEL_SIZES)}, got {self.sizes}; give generate= or those sizes")
+        for study in self.studies:
+            if study.data_sizes is not None and not set(study.data_sizes) <= set(self.sizes):
+                raise ConfigError(f"physics model {self.name!r}: its study {study.name!r} asks for data sizes "
+                                  f"{study.data_sizes}, but the model has {self.sizes}; choose among those")
 
 
 _ENTRIES: dict[str, PhysicsEntry] = {}
