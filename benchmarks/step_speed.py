@@ -53,7 +53,8 @@ import torch
 
 from nnfmu.export import casadi_model
 from nnfmu.export.step_cost import function_cost
-from nnfmu.export.compiler import PROFILE_FLAGS, run_compiler
+from nnfmu.cbuild import run_compiler
+from nnfmu.export.compiler import PROFILE_FLAGS
 from nnfmu.export.fmu import BuildOptions, build_fmu, fmi_header_dir, platform_folder
 from nnfmu.models import EnsembleStepModel, ModelConfig, build_model, save_checkpoint
 

@@ -36,7 +36,7 @@ from typing import Sequence, Union
 
 from nnfmu.errors import FmuBuildError
 
-__all__ = ["DEFAULT_FLAGS", "GCC_ONLY_FLAGS", "CANDIDATES", "compiler_argv", "find_compiler", "is_gcc",
+__all__ = ["DEFAULT_FLAGS", "GCC_ONLY_FLAGS", "CANDIDATES", "compiler_argv", "find_compiler",
            "run_compiler", "compile_shared_library", "shared_library_suffix", "cache_dir", "cpu_id",
            "build_cached", "load"]
 
@@ -83,18 +83,14 @@ def find_compiler(compiler: Compiler = None) -> str:
 
 @functools.lru_cache(maxsize=None)
 def _is_gcc(argv: tuple[str, ...]) -> bool:
+    """Whether the compiler is GCC: its preprocessor defines ``__GNUC__`` and not ``__clang__``.
+    A compiler that cannot answer counts as not GCC."""
     try:
         done = _run([*argv, "-dM", "-E", "-x", "c", os.devnull], None, 60.0)
     except (OSError, subprocess.TimeoutExpired):
         return False
     macros = done.stdout.split()
     return done.returncode == 0 and "__GNUC__" in macros and "__clang__" not in macros
-
-
-def is_gcc(compiler: Compiler = None) -> bool:
-    """Whether the compiler is GCC: its preprocessor defines ``__GNUC__`` and not ``__clang__``.
-    A compiler that cannot answer counts as not GCC."""
-    return _is_gcc(compiler_argv(compiler))
 
 
 def first_error_line(stderr: str) -> str:

@@ -69,11 +69,6 @@ class NrmseResult:
         return self.mae.mean(axis=0)
 
     @property
-    def r2_output_mean(self) -> np.ndarray:
-        """Per-output R² (``1 - NRMSE²`` per trajectory) averaged over trajectories, shape (n_y,)."""
-        return (1.0 - self.per_output**2).mean(axis=0)
-
-    @property
     def r2(self) -> float:
         """R² averaged over outputs and trajectories (as the NRMSE): 1 is perfect, 0 is the measured mean."""
         return float((1.0 - self.per_output**2).mean())

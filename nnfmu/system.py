@@ -36,10 +36,6 @@ import numpy as np
 from nnfmu.errors import ShapeError
 from nnfmu.identifiers import is_c_identifier
 
-INIT_PORTS = (("y0", "u0"), ("x0",))
-STEP_PORTS = (("x", "u"), ("x_next", "y_next"))
-
-
 @dataclass(frozen=True)
 class Variable:
     """A named scalar of an exported model: an input, output or parameter.

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from nnfmu.export.compiler import run_compiler
+from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import fmi_header_dir
 from nnfmu.export.platforms import PLATFORMS, Platform
 

@@ -17,6 +17,7 @@ import torch
 
 from nnfmu.hybrid import GRADIENT_MODES, SUPPORTED_OPS, TorchFunction, sx_to_torch
 from nnfmu.hybrid._sx_source import OP_NAMES
+from physics_sim import simulate_states
 
 RTOL = 1e-12
 BATCH = 32
@@ -171,14 +172,14 @@ def test_arm_ode_matches_casadi():
 
 
 def test_valve_free_run_matches_casadi_simulation():
-    """60 steps of the translated RK4 step, fed its own state, stay on CasADi's simulate_states."""
+    """60 steps of the translated RK4 step, fed its own state, stay on CasADi's free run (tests/physics_sim.py)."""
     from nnfmu.physics import valve_system
 
     system = valve_system()
     step = sx_to_torch(system.model().step)
     u = np.random.default_rng(3).uniform(0.0, 250.0, (60, 2))
     x0 = np.array([20e-6, 0.0, 10e-6, 0.0, 3.0e5, 0.5e-3, 0.0])
-    expected = system.simulate_states(x0, u)
+    expected = simulate_states(system, x0, u)
     x, p = torch.tensor(x0), torch.tensor(system.parameter_values())
     states = []
     with torch.no_grad():

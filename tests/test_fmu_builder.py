@@ -71,7 +71,7 @@ def test_fmu_ships_sources_headers_and_platform_binary(version, platform_dir):
     fmu = built_fmu("nonlinear", version)
     names = set(zipfile.ZipFile(fmu).namelist())
     assert f"{platform_dir}tinynet.so" in names
-    core = ["nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_core.c", "nnfmu_variables.c", "nnfmu_step.c",
+    core = ["nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_log.c", "nnfmu_core.c", "nnfmu_variables.c", "nnfmu_step.c",
             "nnfmu_state.c", "nnfmu_me.c", "nnfmu_libm.c"]
     sources = {"model_casadi.c", "model_me_casadi.c", *core, f"nnfmu_fmi{version}.c", f"fmi{version}Functions.h",
                "nnfmu_model.h", "nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h"}

@@ -20,7 +20,7 @@ import pytest
 from fmpy.build import build_platform_binary
 from fmu_cases import MODELS, built_fmu, get_model, unzipped
 
-from nnfmu.export.compiler import run_compiler
+from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import fmi_header_dir, platform_folder
 
 DRIVER = Path(__file__).parent / "c" / "fmu_driver.c"

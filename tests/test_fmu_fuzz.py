@@ -21,7 +21,7 @@ import pytest
 from fmu_cases import MODELS, FMICallException, Instance, built_fmu, excitation, unzipped
 from test_fmu_me_events import bounded_pendulum
 
-from nnfmu.export.compiler import run_compiler
+from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import fmi_header_dir
 
 C_DIR = Path(__file__).parent / "c"

@@ -29,7 +29,7 @@ from fmu_cases import unzipped
 
 from nnfmu.cli import main as nnfmu_main
 from nnfmu.export.__main__ import main as export_main
-from nnfmu.export.compiler import run_compiler
+from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import fmi_header_dir
 from nnfmu.export.platforms import PLATFORMS, host_platform, parse_platforms, portable_flags
 from nnfmu.models import ModelConfig, build_model, save_checkpoint

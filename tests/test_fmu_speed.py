@@ -28,7 +28,7 @@ from fmu_cases import fmpy_simulate
 
 from nnfmu.errors import ConfigError
 from nnfmu.export import build_fmu, casadi_model
-from nnfmu.export.compiler import run_compiler
+from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import BuildOptions, fmi_header_dir, platform_folder
 from nnfmu.models import ARCHS, ModelConfig, build_model
 from nnfmu.system import CasadiModel, SystemSpec

@@ -159,7 +159,7 @@ def _exit_status(argv) -> int:
 
 
 def test_generate_dataset_rejects_unknown_systems():
-    with pytest.raises(ConfigError, match="unknown system 'pump'; valid systems are valve, arm"):
+    with pytest.raises(ConfigError, match="unknown physics model 'pump'; choose one of arm, slider, valve"):
         generate_dataset("pump")
     with pytest.raises(ConfigError, match="seed must be a non-negative integer"):
         generate_dataset("valve", seed=1.5)

@@ -20,6 +20,7 @@ from nnfmu.greybox.problem import build_problem, cut_windows
 from nnfmu.greybox.window import _sub_sensitivity, sensitivity_step
 from nnfmu.physics import slider_system
 from nnfmu.physics.rk4 import UNROLL_MAX
+from physics_sim import simulate_states
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def slider_data():
     us, ys = [], []
     for _ in range(4):
         u = np.repeat(rng.uniform(-6, 6, size=10), 20)[:, None]
-        x = system.simulate_states([rng.uniform(-1, 1), 0.0], u[:-1])
+        x = simulate_states(system, [rng.uniform(-1, 1), 0.0], u[:-1])
         us.append(u)
         ys.append(x[:, :1] + 1e-3 * rng.standard_normal((200, 1)))
     return from_arrays(Ts=system.Ts, u_train=us, y_train=ys, u_test=us[:1], y_test=ys[:1],

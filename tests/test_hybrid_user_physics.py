@@ -1,6 +1,6 @@
 """Hybrids on any physics model: the registered slider, a user's model file outside the repository, a fit result.
 
-- with its correction zero, a hybrid is exactly its physics (``PhysicsSystem.simulate_states``), in torch with
+- with its correction zero, a hybrid is exactly its physics (an RK4 free run, tests/physics_sim.py), in torch with
   either physics backend and in its FMU; on a grey-box fit result that is the fitted model;
 - a hybrid on ``FILE.py:NAME`` trains jointly with the model's free parameters, and its checkpoint holds the
   physics as a document: after the file is deleted it loads, scores and exports to an FMU that fmpy validates,
@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 import torch
 from fmpy.validation import validate_fmu
-from slider_cases import slider_dataset
+from physics_sim import simulate_states
+from slider_cases import model_exchange_and_co_simulation, slider_dataset
 from test_fmu_model_exchange import MeInstance
 
 from nnfmu.cli import main
@@ -94,7 +95,7 @@ def physics_run(system: PhysicsSystem, u: np.ndarray, y0: np.ndarray) -> np.ndar
     """Outputs (N, n_y) of the physics' own RK4 free run from ``init_state(y0, u[0])``."""
     p = system.parameter_values()
     x0 = np.asarray(system.init_state(y0, u[0], p)).ravel()
-    xs = system.simulate_states(x0, u[:-1])
+    xs = simulate_states(system, x0, u[:-1])
     return np.stack([np.asarray(system.output(x, p)).ravel() for x in xs])
 
 
@@ -266,21 +267,9 @@ def test_model_exchange_integrates_and_its_jacobian_is_finite_differences(traine
 
 
 def test_model_exchange_follows_co_simulation(trained_fmu, data):
-    import fmpy
-
     ds, _ = data
-    u, y0 = ds.test.u[0][:60], ds.test.y[0][0]
-    t = np.arange(len(u)) * ds.Ts
-    steps = [(t[k], u[k - 1, 0]) for k in range(1, len(u)) if u[k, 0] != u[k - 1, 0]]  # held: a step, no ramp
-    signal = np.array(sorted(steps + list(zip(t, u[:, 0])), key=lambda row: row[0]),
-                      dtype=[("time", float), ("F", float)])
-    runs = {}
-    for kind, options in (("CoSimulation", {}), ("ModelExchange", {"solver": "CVode", "relative_tolerance": 1e-10})):
-        result = fmpy.simulate_fmu(str(trained_fmu), fmi_type=kind, stop_time=t[-1], output_interval=ds.Ts,
-                                   input=signal, start_values={"pos_start": float(y0[0])}, **options)
-        rows = [np.flatnonzero(np.abs(result["time"] - t_k) < 1e-6 * ds.Ts)[-1] for t_k in t]  # not the events'
-        runs[kind] = result["pos"][rows]
-    assert np.ptp(runs["CoSimulation"]) > 0.01
+    runs = model_exchange_and_co_simulation(trained_fmu, ds, ds.test.u[0][:60], ds.test.y[0][0])
+    assert np.ptp(runs["CoSimulation"]) > 0.01  # the run moves
     # CVode integrates the hybrid's ODE; co-simulation is its RK4 (2 sub-steps of 5 ms): RK4's error (measured 1.6e-8)
     assert _relative(runs["ModelExchange"], runs["CoSimulation"]) < 1e-6
 

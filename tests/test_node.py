@@ -16,7 +16,7 @@ import io
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
-from slider_cases import slider_dataset
+from slider_cases import model_exchange_and_co_simulation, slider_dataset
 from test_fmu_model_exchange import MeInstance
 
 from nnfmu.cli import main
@@ -103,21 +103,9 @@ def test_the_fmu_validates_and_co_simulates_as_the_torch_free_run(trained, data)
 
 
 def test_model_exchange_with_cvode_follows_co_simulation(trained, data):
-    import fmpy
-
     ds, fmu = data[0], trained[2]
-    u, y0 = ds.test.u[0], ds.test.y[0][0]
-    t = np.arange(len(u)) * ds.Ts
-    steps = [(t[k], u[k - 1, 0]) for k in range(1, len(u)) if u[k, 0] != u[k - 1, 0]]  # held: a step, no ramp
-    signal = np.array(sorted(steps + list(zip(t, u[:, 0])), key=lambda row: row[0]),
-                      dtype=[("time", float), ("F", float)])
-    runs = {}
-    for kind, options in (("CoSimulation", {}), ("ModelExchange", {"solver": "CVode", "relative_tolerance": 1e-10})):
-        result = fmpy.simulate_fmu(str(fmu), fmi_type=kind, stop_time=t[-1], output_interval=ds.Ts,
-                                   input=signal, start_values={"pos_start": float(y0[0])}, **options)
-        rows = [np.flatnonzero(np.abs(result["time"] - t_k) < 1e-6 * ds.Ts)[-1] for t_k in t]  # not the events'
-        runs[kind] = result["pos"][rows]
-    assert np.ptp(runs["CoSimulation"]) > 0.01
+    runs = model_exchange_and_co_simulation(fmu, ds, ds.test.u[0], ds.test.y[0][0])
+    assert np.ptp(runs["CoSimulation"]) > 0.01  # the run moves
     # CVode integrates the node's ODE at its own steps; co-simulation is one RK4 step per 10 ms sample
     assert _relative(runs["ModelExchange"], runs["CoSimulation"]) < 1e-5
 

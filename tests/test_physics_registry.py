@@ -8,12 +8,33 @@ import numpy as np
 import pytest
 
 from nnfmu.errors import CheckpointError, ConfigError, ShapeError
-from nnfmu.physics import (PhysicsEntry, physics_names, register_physics, resolve_physics, system_from_document,
-                           system_to_document)
+from nnfmu.physics import (PhysicsEntry, StudyPreset, physics_entry, physics_names, register_physics,
+                           resolve_physics, study_names, study_preset, system_from_document, system_to_document)
 
 
 def test_the_built_in_models_are_registered():
     assert {"valve", "arm", "slider"} <= set(physics_names())
+
+
+def test_each_study_compares_with_the_model_of_its_entry():
+    assert set(study_names()) >= {"valve", "arm", "robot", "slider"}
+    entry, robot = study_preset("robot")
+    assert entry is physics_entry("arm") and robot.data_sizes is None and robot.data_kind == "robot-benchmark"
+    assert study_preset("valve")[1].data_sizes == physics_entry("valve").sizes  # the full size first
+    with pytest.raises(ConfigError, match="unknown system 'pump'; choose one of arm, robot, slider, valve"):
+        study_preset("pump")
+
+
+def test_an_entry_refuses_a_study_it_cannot_generate_data_for():
+    lag = lambda: resolve_physics("slider")  # noqa: E731
+    with pytest.raises(ConfigError, match="asks for data sizes .*'paper'.* choose among those"):
+        PhysicsEntry("lag", lag, studies=(StudyPreset(name="lag", title="Lag", data_sizes=("paper", "small")),))
+    with pytest.raises(ConfigError, match="without a generator of its own its sizes are standard, small"):
+        PhysicsEntry("lag", lag, sizes=("huge",))
+    with pytest.raises(ConfigError, match="no other braces"):
+        StudyPreset(name="lag", title="Lag", data_sizes=None, note="x = {1, 2}")
+    with pytest.raises(ConfigError, match="already the study of 'arm'"):
+        register_physics(PhysicsEntry("lag", lag, studies=(StudyPreset(name="robot", title="R", data_sizes=None),)))
 
 
 def test_an_unknown_name_lists_the_choices():

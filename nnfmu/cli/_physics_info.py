@@ -7,13 +7,38 @@ whether it returns a model; docs/own-physics.md).
 from __future__ import annotations
 
 import dataclasses
+import sys
 import textwrap
 from pathlib import Path
 
 
+def physics_names() -> tuple[str, ...]:
+    """The registered physics models (imported on first use: the registry pulls in CasADi)."""
+    from nnfmu.physics import physics_names as names
+
+    return _without_broken_plugins(names)
+
+
+def study_names() -> tuple[str, ...]:
+    """The studies ``nnfmu reproduce`` and ``nnfmu tune --system`` take, from the physics registry."""
+    from nnfmu.physics import study_names as names
+
+    return _without_broken_plugins(names)
+
+
+def _without_broken_plugins(names) -> tuple[str, ...]:
+    """A plug-in that cannot be imported must not break every command: say so, and go on without it."""
+    from nnfmu.errors import ConfigError
+
+    try:
+        return names()
+    except ConfigError as exc:
+        print(f"nnfmu: warning: {exc}", file=sys.stderr)
+        return names(plugins=False)
+
+
 def is_physics(path: str) -> bool:
     """Whether ``nnfmu info`` should read ``path`` as a physics model (a file spec or a registered name)."""
-    from nnfmu.physics import physics_names
     from nnfmu.physics.model_file import is_file_spec
 
     return is_file_spec(path) or (not Path(path).exists() and path in physics_names())

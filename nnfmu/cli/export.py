@@ -53,7 +53,7 @@ def check_fmu_options(args: argparse.Namespace) -> None:
     import re
 
     from nnfmu.errors import ConfigError, FmuBuildError
-    from nnfmu.export.compiler import run_compiler
+    from nnfmu.cbuild import run_compiler
 
     if args.target_isa is None or args.platforms not in (None, "host"):
         return  # cross-compiled binaries: Zig judges -march per target

@@ -1,6 +1,6 @@
 """``nnfmu physics-fmu SPEC -o X.fmu``: a physics model as an FMU, RK4 inside doStep, the ODE for Model Exchange.
 
-SPEC is a registered model (valve, arm, slider), a model of your own ``path/to/file.py:NAME`` (loading it
+SPEC is a registered model (:func:`nnfmu.physics.physics_names`), a model of your own ``path/to/file.py:NAME`` (loading it
 runs that file's code; docs/own-physics.md) or a ``.json`` physics document or grey-box fit result. The
 model is :meth:`nnfmu.physics.PhysicsSystem.model` (fixed-step RK4 with ``n_sub`` sub-steps per sample),
 written by the same builder as the networks; the FMU is standalone C and never needs the model file again.
@@ -12,15 +12,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from nnfmu.cli._arch import LazyChoices
+from nnfmu.cli._physics_info import physics_names
 from nnfmu.cli.export import add_fmu_options, check_fmu_options, write_fmu
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("physics-fmu", help="write a physics model (built-in or your own) as an FMU",
                        description="Write a physics model as an FMU (co-simulation with RK4, and Model Exchange). "
-                                   "SPEC: a built-in model (valve, arm, slider), path/to/file.py:NAME (runs that "
-                                   "file's code) or a .json physics document or grey-box fit result.")
-    p.add_argument("system", metavar="SPEC", help="which physics model: valve, arm, slider, file.py:NAME or a .json")
+                                   "SPEC: a registered model, path/to/file.py:NAME (runs that file's code) or a "
+                                   ".json physics document or grey-box fit result.")
+    p.add_argument("system", metavar="SPEC", choices=LazyChoices(physics_names, open_choices=True),
+                   help="which physics model: %(choices)s, file.py:NAME or a .json")
     p.add_argument("-o", "--out", help="the .fmu file to write (default: <model name>.fmu)")
     add_fmu_options(p)
     p.add_argument("--n-sub", type=int, metavar="N",

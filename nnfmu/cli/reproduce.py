@@ -1,4 +1,4 @@
-"""``nnfmu reproduce valve|arm|robot|slider --out DIR [--budget smoke|quick|paper] [--data PATH] [--tune] [--seed N]``.
+"""``nnfmu reproduce SYSTEM --out DIR [--budget smoke|quick|paper] [--data PATH] [--tune] [--seed N]``.
 
 Runs the paper's study as resumable cells (see :mod:`nnfmu.study.pipeline`):
 data, 5 architectures x 2 strategies, every model exported to an FMU, the
@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from nnfmu.cli._arch import LazyChoices
+from nnfmu.cli._physics_info import study_names
 from nnfmu.cli._resources import add_resource_options
 
 _DESCRIPTION = (
@@ -28,7 +30,8 @@ _DESCRIPTION = (
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("reproduce", help="run the paper's study: 5 networks x 2 strategies + baselines, as FMUs",
                        description=_DESCRIPTION)
-    p.add_argument("system", choices=["valve", "arm", "robot", "slider"], help="which system")
+    p.add_argument("system", choices=LazyChoices(study_names), metavar="SYSTEM",
+                   help="which system: %(choices)s (the studies of the registered physics models)")
     p.add_argument("-o", "--out", required=True, help="study folder (created; re-use it to resume)")
     p.add_argument("--budget", choices=["smoke", "quick", "paper"], default="quick",
                    help="data size, training length and hyperparameters (default quick)")

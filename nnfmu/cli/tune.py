@@ -16,6 +16,7 @@ import contextlib
 from pathlib import Path
 
 from nnfmu.cli._arch import LazyChoices
+from nnfmu.cli._physics_info import study_names
 from nnfmu.cli._resources import add_device_option
 from nnfmu.cli._text import description
 
@@ -42,8 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--patience", type=int, help="early-stopping patience of each trial (default: the budget's)")
     p.add_argument("--budget", choices=["smoke", "quick", "paper"], default="quick",
                    help="where the base configuration and the grid come from (default quick)")
-    p.add_argument("--system", choices=["valve", "arm", "robot"],
-                   help="system of the budget table (default: read from the dataset's source)")
+    p.add_argument("--system", choices=LazyChoices(study_names), metavar="SYSTEM",
+                   help="system of the budget table: %(choices)s (default: read from the dataset's source)")
     p.add_argument("--grid", nargs="+", metavar="FIELD=V1,V2", help="grid to search instead of the budget's, "
                    "e.g. --grid hidden=16,32 lr=0.001,0.003")
     p.add_argument("--seed", type=int, default=0, help="training seed of the first repetition (default 0)")
@@ -115,13 +116,13 @@ def _system(args, ds) -> str:
 
     if args.system:
         return args.system
-    source = ds.source
-    if source.get("kind") == "robot-benchmark":
-        return "robot"
-    if source.get("system") in ("valve", "arm"):
-        return source["system"]
+    from nnfmu.study.data_check import declared_system
+
+    declared = declared_system(ds)
+    if declared is not None:
+        return declared
     raise ConfigError(f"cannot tell which system {args.data} holds (its source names none); pass --system "
-                      "valve|arm|robot to choose the base configuration and the grid")
+                      f"{'|'.join(study_names())} to choose the base configuration and the grid")
 
 
 def _cpus_per_trial(args: argparse.Namespace) -> float:

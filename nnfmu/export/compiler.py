@@ -1,20 +1,16 @@
-"""The FMU binaries' compiler flags, over the one C build service :mod:`nnfmu.cbuild`.
+"""The FMU binaries' build profiles: compiler flags over the one C build service :mod:`nnfmu.cbuild`.
 
 Every compile (the FMU's binary, the benchmark drivers) goes through
-:func:`nnfmu.cbuild.run_compiler` (re-exported here with the service's other
-names), which raises :class:`nnfmu.errors.FmuBuildError` in one line, with the
-compiler's whole stderr as ``.stderr``, when the compiler is missing, fails or
-hangs. Flags that only GCC understands (:data:`GCC_ONLY_FLAGS`) reach GCC alone:
-clang and ``zig cc`` reject them.
+:func:`nnfmu.cbuild.run_compiler`, which raises :class:`nnfmu.errors.FmuBuildError` in one line, with the
+compiler's whole stderr as ``.stderr``, when the compiler is missing, fails or hangs. Flags that only GCC
+understands (:data:`nnfmu.cbuild.GCC_ONLY_FLAGS`) reach GCC alone: clang and ``zig cc`` reject them.
 """
 
 from __future__ import annotations
 
-from nnfmu.cbuild import (CANDIDATES, DEFAULT_FLAGS, GCC_ONLY_FLAGS, compile_shared_library, find_compiler, is_gcc,
-                          run_compiler, shared_library_suffix)
+from nnfmu.cbuild import DEFAULT_FLAGS
 
-__all__ = ["DEFAULT_FLAGS", "PROFILE_FLAGS", "GCC_ONLY_FLAGS", "CANDIDATES", "find_compiler", "is_gcc",
-           "run_compiler", "shared_library_suffix", "compile_shared_library"]
+__all__ = ["PROFILE_FLAGS"]
 
 #: Flags of the FMU build profiles (nnfmu.export.codegen): "exact" is DEFAULT_FLAGS; "fast" lets the
 #: compiler fuse a*b+c into FMA, and -fno-trapping-math lets it turn the branch-free selects of the

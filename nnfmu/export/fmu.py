@@ -55,8 +55,8 @@ from nnfmu.tempdirs import private_temp_dir
 
 #: Compiled, in this order; model_casadi.c and model_me_casadi.c are not listed: nnfmu_model.c and
 #: nnfmu_me_model.c include them (see nnfmu_libm.h).
-CORE_SOURCES = ("nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_core.c", "nnfmu_variables.c", "nnfmu_step.c",
-                "nnfmu_state.c", "nnfmu_me.c", "nnfmu_libm.c")
+CORE_SOURCES = ("nnfmu_model.c", "nnfmu_me_model.c", "nnfmu_log.c", "nnfmu_core.c", "nnfmu_variables.c",
+                "nnfmu_step.c", "nnfmu_state.c", "nnfmu_me.c", "nnfmu_libm.c")
 #: The core: every FMU gets these files.
 TEMPLATES = ("nnfmu_core.h", "nnfmu_instance.h", "nnfmu_libm.h", *CORE_SOURCES)
 #: nnfmu's own build links libm, so the model code calls it directly.

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from nnfmu.errors import ConfigError, FmuBuildError
-from nnfmu.export import compiler
+from nnfmu import cbuild
 
 __all__ = ["Platform", "PLATFORMS", "host_platform", "parse_platforms", "zig_executable", "build_binaries"]
 
@@ -130,7 +130,7 @@ def cross_compile(target: Platform, sources: Sequence[Path], output: Path, *, in
         built = Path(tmp) / output.name  # zig also writes .pdb/.lib beside a DLL: keep the library only
         args = ["-target", target.zig_target, *portable_flags(flags), "-shared",
                 *(f"-I{d}" for d in include_dirs), *map(str, sources), "-o", str(built), "-lm"]
-        compiler.run_compiler(args, what=what, compiler=[str(zig), "cc"])
+        cbuild.run_compiler(args, what=what, compiler=[str(zig), "cc"])
         shutil.move(str(built), output)
     return output
 
@@ -156,8 +156,8 @@ def build_binaries(root: Path, model_identifier: str, sources: Sequence[Path], f
         what = f"compiling the FMU binary of {model_identifier!r} for {folder}"
         start = time.perf_counter()
         if target == host:
-            compiler.compile_shared_library(sources, out, include_dirs=[root / "sources"], flags=host_flags,
-                                            compiler=compiler_command, what=what)
+            cbuild.compile_shared_library(sources, out, include_dirs=[root / "sources"], flags=host_flags,
+                                          compiler=compiler_command, what=what)
         else:
             cross_compile(target, sources, out, include_dirs=[root / "sources"], flags=cross_flags, what=what)
         return folder, time.perf_counter() - start

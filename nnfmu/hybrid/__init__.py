@@ -9,7 +9,7 @@
 - The physics in torch, written once in CasADi: :func:`casadi_to_torch` picks
   :func:`compiled_to_torch` (compiled C forward and reverse mode; fast) or :func:`sx_to_torch`
   (a :class:`TorchFunction` translating the SX instructions into torch operations).
-- :func:`load_physics_params`: read a JSON parameter file; :data:`PHYSICS`: the physics models.
+- :func:`load_physics_params`: read a JSON parameter file (the physics models: :mod:`nnfmu.physics.registry`).
 
 The hybrid is an architecture like the networks: this module registers its record
 (:mod:`nnfmu.models.architectures`) and is found through the entry point ``nnfmu.architectures``
@@ -21,57 +21,20 @@ from typing import TYPE_CHECKING
 
 from nnfmu._lazy import lazy_exports
 from nnfmu.errors import ConfigError
+from nnfmu.hybrid._exports import declared_exports
 from nnfmu.limits import MAX_RK4_SUBSTEPS
 from nnfmu.models.architectures import Architecture, Option, register_architecture
 
-_LAZY = {
-    "SUPPORTED_OPS": "nnfmu.hybrid._sx_source",
-    "GRADIENT_MODES": "nnfmu.hybrid.casadi_torch",
-    "TorchFunction": "nnfmu.hybrid.casadi_torch",
-    "sx_to_torch": "nnfmu.hybrid.casadi_torch",
-    "BACKENDS": "nnfmu.hybrid.compiled_torch",
-    "CompiledFunction": "nnfmu.hybrid.compiled_torch",
-    "casadi_to_torch": "nnfmu.hybrid.compiled_torch",
-    "compiled_to_torch": "nnfmu.hybrid.compiled_torch",
-    "CORRECTIONS": "nnfmu.hybrid.config",
-    "HYBRID_ARCH": "nnfmu.hybrid.config",
-    "PHYSICS": "nnfmu.hybrid.config",
-    "HybridConfig": "nnfmu.hybrid.config",
-    "load_physics_params": "nnfmu.hybrid.config",
-    "physics_system": "nnfmu.hybrid.config",
-    "hybrid_casadi_model": "nnfmu.hybrid.export",
-    "hybrid_to_casadi": "nnfmu.hybrid.export",
-    "HybridStepModel": "nnfmu.hybrid.model",
-}
-
-if TYPE_CHECKING:  # what _LAZY imports on first use, for readers and tools (mkdocstrings, type checkers)
+if TYPE_CHECKING:  # the one declaration of the public names, imported on first use (nnfmu.hybrid._exports)
     from nnfmu.hybrid._sx_source import SUPPORTED_OPS
     from nnfmu.hybrid.casadi_torch import GRADIENT_MODES, TorchFunction, sx_to_torch
     from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_torch, compiled_to_torch
-    from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, PHYSICS, HybridConfig, load_physics_params, physics_system
+    from nnfmu.hybrid.config import CORRECTIONS, HYBRID_ARCH, HybridConfig, load_physics_params, physics_system
     from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
     from nnfmu.hybrid.model import HybridStepModel
 
-__all__ = [
-    "BACKENDS",
-    "CORRECTIONS",
-    "CompiledFunction",
-    "GRADIENT_MODES",
-    "HYBRID_ARCH",
-    "HybridConfig",
-    "HybridStepModel",
-    "PHYSICS",
-    "SUPPORTED_OPS",
-    "TorchFunction",
-    "casadi_to_torch",
-    "compiled_to_torch",
-    "hybrid_casadi_model",
-    "hybrid_to_casadi",
-    "load_physics_params",
-    "physics_system",
-    "sx_to_torch",
-]
-
+_LAZY = declared_exports(__file__)
+__all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_exports("nnfmu.hybrid", globals(), _LAZY)
 
 
@@ -80,14 +43,14 @@ def _names(text: str) -> tuple[str, ...]:
     return tuple(n.strip() for n in text.split(",") if n.strip())
 
 
-def _counting_config(config):
+def counting_config(config):
     """The config whose parameters are counted on torch's meta device: the physics in torch operations (the
     compiled backend would compile C first), one RK4 sub-step (the count does not depend on them; the
-    construction's dry-run step of the arm's 50 took minutes there, op by op)."""
+    construction's dry-run step of the arm's 50 took minutes there, op by op). The neural ODE's too."""
     return config.replace(physics_backend="sx", n_sub=1)
 
 
-def _check_device(config, device) -> None:
+def check_device(config, device) -> None:
     if device.type != "cpu" and config.physics_backend == "compiled":
         raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
                           "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
@@ -131,6 +94,6 @@ register_architecture(Architecture(
     linear_path=False,
     strategies=("parallel",),
     dtype="float64",
-    counting_config=_counting_config,
-    check_device=_check_device,
+    counting_config=counting_config,
+    check_device=check_device,
 ))

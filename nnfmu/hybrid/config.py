@@ -7,7 +7,7 @@ correction MLP; ``window`` is 1 (the physics state is the memory); ``kernel_size
 ``skip_scale`` do not apply (the physics plays the part of the skip connection).
 
 The physics is a spec that :func:`nnfmu.physics.resolve_physics` understands: a registered name
-(``"valve"``, ``"arm"``, ``"slider"``; stored as the name, as before), a model file
+(:func:`nnfmu.physics.physics_names`; stored as the name, as before), a model file
 ``"path/to/file.py:NAME"``, a physics document or grey-box fit result ``"path/to/file.json"``, or a
 :class:`~nnfmu.physics.PhysicsSystem` itself. Anything but a registered name is stored in the
 config (and so in every checkpoint) as its physics document (:func:`nnfmu.physics.document.system_to_document`:
@@ -46,11 +46,6 @@ HYBRID_ARCH = "hybrid"
 #: 40 us). One sample made the first epochs' steps ten times too large: on a viscous slider fitted to Stribeck
 #: data the first epoch's loss was 0.89 against 0.09 with ten samples.
 DEFAULT_CORRECTION_SAMPLES = 10
-
-
-PHYSICS = {name: physics_entry(name) for name in ("valve", "arm")}
-"""The two physics models hybrids took before the registry (kept for callers that read it; the registry,
-:func:`nnfmu.physics.physics_names`, holds every model)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -18,19 +18,20 @@ This module registers the record only (no torch, no CasADi); the code is importe
 
 from typing import TYPE_CHECKING
 
-from nnfmu.hybrid import PHYSICS_OPTIONS  # registers the hybrid first: the shared options appear under it
+# registers the hybrid first (the shared options appear under it); the physics hooks are the hybrid's
+from nnfmu.hybrid import PHYSICS_OPTIONS, check_device, counting_config
 from nnfmu._lazy import lazy_exports
+from nnfmu.hybrid._exports import declared_exports
 from nnfmu.models.architectures import Architecture, Option, register_architecture
 
 NODE_ARCH = "node"
 
-_LAZY = {"NodeConfig": "nnfmu.node.config", "node_physics": "nnfmu.node.config", "NodeStepModel": "nnfmu.node.model"}
-
-if TYPE_CHECKING:  # what _LAZY imports on first use
+if TYPE_CHECKING:  # the one declaration of the public names, imported on first use (nnfmu.hybrid._exports)
     from nnfmu.node.config import NodeConfig, node_physics
     from nnfmu.node.model import NodeStepModel
 
-__all__ = ["NODE_ARCH", "NodeConfig", "NodeStepModel", "node_physics"]
+_LAZY = declared_exports(__file__)
+__all__ = ["NODE_ARCH", *sorted(_LAZY)]
 
 __getattr__, __dir__ = lazy_exports("nnfmu.node", globals(), _LAZY)
 
@@ -54,6 +55,6 @@ register_architecture(Architecture(
     linear_path=False,
     strategies=("parallel",),
     dtype="float64",
-    counting_config="nnfmu.hybrid:_counting_config",
-    check_device="nnfmu.hybrid:_check_device",
+    counting_config=counting_config,
+    check_device=check_device,
 ))

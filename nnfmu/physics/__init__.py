@@ -21,13 +21,17 @@ from nnfmu.physics.base import PhysicsSystem, parameter_variables, params_to_jso
 from nnfmu.physics.builder import ModelBuilder, check_system
 from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.document import system_from_document, system_to_document
-from nnfmu.physics.generate import DATASET_SIZES, check_request, generate_dataset
+from nnfmu.physics.generate import check_request, generate_dataset
 from nnfmu.physics.generate_model import generate_model_dataset
 from nnfmu.physics.model_file import models_in_file
 from nnfmu.physics.rk4 import rk4_function, rk4_step
 from nnfmu.physics.slider import SliderParams, slider_system
 from nnfmu.physics.valve import ValveParams, valve_system
-from nnfmu.physics.registry import PhysicsEntry, physics_entry, physics_names, register_physics, resolve_physics
+from nnfmu.physics.registry import (PhysicsEntry, StudyPreset, physics_entry, physics_names, register_physics,
+                                    resolve_physics, study_names, study_preset)
+
+# The built-in models register themselves (with their generators and studies) in these modules.
+from nnfmu.physics import generate_arm, generate_slider, generate_valve  # noqa: E402,F401  isort: skip
 
 __all__ = [
     "ModelBuilder",
@@ -35,6 +39,9 @@ __all__ = [
     "generate_model_dataset",
     "models_in_file",
     "PhysicsEntry",
+    "StudyPreset",
+    "study_names",
+    "study_preset",
     "physics_entry",
     "physics_names",
     "register_physics",
@@ -44,7 +51,6 @@ __all__ = [
     "ARM_F_B_CAP",
     "ARM_N_SUB",
     "ArmParams",
-    "DATASET_SIZES",
     "PhysicsSystem",
     "SliderParams",
     "ValveParams",

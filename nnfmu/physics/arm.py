@@ -52,7 +52,6 @@ import casadi as ca
 
 from nnfmu.data.loaders import ROBOT_INPUTS, ROBOT_OUTPUTS
 from nnfmu.physics.arm_dynamics import Link, forward_dynamics
-from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, params_to_json
 from nnfmu.physics.builder import ModelBuilder
 
@@ -194,6 +193,3 @@ def arm_system(params: ArmParams | None = None, *, f_b_cap: float | None = ARM_F
     m.init(**{f"q{j + 1}": measured[j] * (math.pi / 180.0) for j in _J6})  # the velocities start at 0
     return m.build()
 
-
-register_physics(PhysicsEntry("arm", arm_system, corrected_states=tuple(f"qd{j}" for j in range(1, 7)),
-                              correction_time=1.0))

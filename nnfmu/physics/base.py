@@ -240,17 +240,3 @@ class PhysicsSystem:
         ode = ca.Function("ode", [x, u] + extra, [self.ode(x, u, p)], ["x", "u"] + extra_names, ["xdot"])
         output = ca.Function("output", [x] + extra, [self.output(x, p)], ["x"] + extra_names, ["y"])
         return ContinuousDynamics(ode=ode, output=output, states=self.states, nominals=self.state_scales)
-
-    def simulate_states(self, x0, u, *, p=None, n_sub: int | None = None) -> np.ndarray:
-        """States of an RK4 free run: ``x0`` (n_x,), ``u`` (N, n_u) -> x (N + 1, n_x), x[0] = x0.
-
-        Runs in CasADi's virtual machine (no compilation); meant for tests and short runs.
-        """
-        u = np.atleast_2d(np.asarray(u, dtype=float))
-        if u.shape[1] != len(self.inputs):
-            raise ShapeError(f"u has shape {u.shape}, expected (n_steps, {len(self.inputs)})")
-        p = self.parameter_values() if p is None else np.asarray(p, dtype=float)
-        n_sub = self.n_sub if n_sub is None else n_sub
-        step = rk4_function(self.ode, Ts=self.Ts, n_sub=n_sub, name=f"{self.name}_rk4")
-        xs = step.mapaccum("sim", u.shape[0])(np.asarray(x0, float), u.T, np.repeat(p[:, None], len(u), 1))
-        return np.vstack([np.asarray(x0, float)[None, :], np.asarray(xs).T])

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, params_to_json
 from nnfmu.physics.builder import ModelBuilder
 
@@ -65,5 +64,3 @@ def slider_system(params: SliderParams | None = None) -> PhysicsSystem:
     m.output("pos", "m", "measured position of the mass", pos)  # x0: pos from the measurement, v = 0 (its start)
     return m.build()
 
-
-register_physics(PhysicsEntry("slider", slider_system, corrected_states=("v",), correction_time=0.1))

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from nnfmu.physics.registry import PhysicsEntry, register_physics
 from nnfmu.physics.base import PhysicsSystem, param, params_to_json
 from nnfmu.physics.builder import ModelBuilder
 from nnfmu.system import Variable
@@ -180,5 +179,3 @@ def valve_system(params: ValveParams | None = None) -> PhysicsSystem:
     m.init(z1=P.d_u * u[0], z2=P.d_u * u[1])
     return m.build()
 
-
-register_physics(PhysicsEntry("valve", valve_system, corrected_states=("p", "sdot"), correction_time=1e-3))

@@ -8,7 +8,7 @@
   :class:`TuneSettings`, :class:`TuneResult`
 """
 
-from nnfmu.study.budgets import BUDGETS, STUDY_BUDGETS, SYSTEMS, VALVE_NOISE, Budget, Hyper, get_budget
+from nnfmu.study.budgets import BUDGETS, SYSTEMS, VALVE_NOISE, Budget, Hyper, get_budget
 from nnfmu.study.cells import Cell, CellLog, run_cells
 from nnfmu.study.demo import DEMO_OUT, run_demo
 from nnfmu.study.pipeline import Study, StudyResult, network_name, reproduce
@@ -17,7 +17,6 @@ from nnfmu.study.tune import MissingExtraError, TuneResult, TuneSettings, requir
 __all__ = [
     "BUDGETS",
     "DEMO_OUT",
-    "STUDY_BUDGETS",
     "SYSTEMS",
     "VALVE_NOISE",
     "Budget",

@@ -23,6 +23,7 @@ from nnfmu.errors import (
     SimulationError,
     TrainingError,
 )
+from nnfmu.physics import study_preset
 from nnfmu.study.budgets import Budget, Hyper
 from nnfmu.study.data_check import check_study_data
 from nnfmu.atomic import write_atomic, write_text_atomic
@@ -55,13 +56,14 @@ def trim(ds: Dataset, budget: Budget, seed: int) -> Dataset:
 
 
 def check_source(system: str, source: Path | None, data_dir: Path) -> None:
-    """Before a study touches its folder: the robot needs data, and given data must load and be of ``system``.
+    """Before a study touches its folder: a study of measured data (the robot) needs them, and given data must
+    load and be of ``system``.
 
     Data already prepared in ``data_dir`` are not read again (the source may have moved since).
     """
     if source is None:
-        if system == "robot":
-            raise ConfigError("the robot study needs measured data: pass --data with the benchmark's .mat file "
+        if study_preset(system)[1].data_sizes is None:
+            raise ConfigError(f"the {system} study needs measured data: pass --data with the benchmark's .mat file "
                               "or a dataset folder")
         return
     if not (data_dir / "meta.json").exists():
@@ -70,14 +72,15 @@ def check_source(system: str, source: Path | None, data_dir: Path) -> None:
 
 def prepare_data(system: str, budget: Budget, seed: int, source: Path | None, out: Path,
                  progress: bool) -> str:
-    """Generate (valve, arm, slider) or load (``source``) the data, trim it to the budget and save it at ``out``."""
+    """Generate (with the study's physics model) or load (``source``) the data, trim it to the budget and save it
+    at ``out``."""
     if source is not None:
         ds = load_source(source)
         check_study_data(system, ds, str(source))
     else:
         from nnfmu.physics import generate_dataset
 
-        ds = generate_dataset(system, size=budget.data_size, seed=seed, progress=progress)
+        ds = generate_dataset(study_preset(system)[0].name, size=budget.data_size, seed=seed, progress=progress)
         if budget.noise:
             ds = ds.with_measurement_noise(budget.noise, seed)
     ds = trim(ds, budget, seed)
@@ -198,10 +201,8 @@ def export_linear(model_file: Path, fmu: Path, name: str) -> str:
 
 
 def physics_model(system: str):
-    """The physics reference model of ``system`` (the robot is scored against the arm model)."""
-    from nnfmu.physics import arm_system, slider_system, valve_system
-
-    return {"valve": valve_system, "slider": slider_system}.get(system, arm_system)().model()
+    """The physics reference model of the study ``system`` (the robot is scored against the arm model)."""
+    return study_preset(system)[0].build().model()
 
 
 def export_physics(system: str, fmu: Path) -> str:

@@ -26,7 +26,8 @@ from nnfmu.atomic import write_text_atomic
 from nnfmu.errors import ConfigError, DataFileError
 from nnfmu.study import cell_work
 from nnfmu.study import parallel
-from nnfmu.study.budgets import SYSTEMS, Budget, Hyper, get_budget, network_name
+from nnfmu.physics import study_preset
+from nnfmu.study.budgets import Budget, Hyper, get_budget, network_name
 from nnfmu.study.cells import Cell, CellLog, run_cells
 
 TrainCallback = Callable[[str, int, dict], None]
@@ -52,8 +53,7 @@ class Study:
                  tune: bool | None = None, seed: int = 0, address: str | None = None, progress: bool = True,
                  callback: TrainCallback | None = None, echo: Callable[[str], None] | None = print,
                  jobs: int = 1, device: str = "auto", threads: int | None = None):
-        if system not in SYSTEMS:
-            raise ConfigError(f"unknown system {system!r}; choose one of {', '.join(SYSTEMS)}")
+        study_preset(system)  # ConfigError listing the registered studies when there is none
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
         self.system, self.out, self.budget, self.seed = system, Path(out), budget, seed
@@ -255,7 +255,8 @@ def reproduce(system: str, out: str | Path, *, budget: str | Budget = "quick", d
 
     Parameters
     ----------
-    system : {'valve', 'arm', 'robot', 'slider'}
+    system : str
+        A study of a registered physics model (:func:`nnfmu.physics.study_names`: valve, arm, robot, slider).
     out : path
         The study folder; cells already done there are skipped, an unfinished training is resumed.
     budget : str or Budget

@@ -16,6 +16,7 @@ import numpy as np
 from nnfmu.cosim import Evaluation
 from nnfmu.data import Dataset, load_dataset
 from nnfmu.metrics import nrmse
+from nnfmu.physics import study_preset
 from nnfmu.study import cell_work
 from nnfmu.study.budgets import network_name
 from nnfmu.study.report_md import render_markdown
@@ -87,10 +88,7 @@ def _baselines(ds: Dataset, study) -> list[tuple[dict, Evaluation | None]]:
 
     info = json.loads((study.out / "models" / "linear.json").read_text()).get("info", {})
     order = info.get("order") or info.get("n_x")
-    physics = {"valve": "Physics model (the valve model that generated the data, RK4)",
-               "arm": "Physics model (the arm model that generated the data, RK4)",
-               "slider": "Physics model (the slider model that generated the data, RK4)",
-               "robot": "Arm physics model (nominal parameters, open loop; not fitted to this robot)"}[study.system]
+    physics = study_preset(study.system)[1].physics_label
     rows = []
     for name, label, extra in (("linear", "Linear state-space baseline" + (f" (n_x = {order})" if order else ""),
                                 {"identification": info}),
@@ -122,7 +120,7 @@ def _figures(study, ds: Dataset, best: dict, evaluations: dict) -> list[str]:
     chosen = [evaluations[best[s]] for s in STRATEGIES if best[s] and evaluations.get(best[s])]
     with_baselines = chosen[:1] + [evaluations[n] for n in ("linear", "physics") if evaluations.get(n)]
     # Fig. 2 (valve): one representative test trajectory; Fig. 3 (robot, arm): the whole test record.
-    index = None if study.system in ("valve", "slider") else 0
+    index = 0 if study_preset(study.system)[1].whole_record else None
     out = []
     for stem, evs in (("best_parallel_vs_series_parallel", chosen), ("best_network_vs_baselines", with_baselines)):
         if evs:

@@ -122,14 +122,28 @@ NNFMU_INTERNAL nnfmu_status nnfmu_me_get_nominals(nnfmu_instance *inst, const ch
 NNFMU_INTERNAL nnfmu_status nnfmu_me_event_indicators(nnfmu_instance *inst, const char *caller, size_t n);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_number_of_states(nnfmu_instance *inst, const char *caller, size_t *n);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_number_of_event_indicators(nnfmu_instance *inst, const char *caller, size_t *n);
+/* What an event iteration tells the importer: the fields of FMI 2's fmi2EventInfo and the outputs of FMI 3's
+ * fmi3UpdateDiscreteStates, in the same order (the wrappers only copy them into their own types). */
+typedef struct {
+  int discrete_states_need_update; /* never: the model has no discrete states */
+  int terminate_simulation;
+  int nominals_changed;
+  /* An input or a tunable parameter changed since the event began (or since the last call), so that the
+   * right-hand side jumped and the importer must restart its integrator: valuesOfContinuousStatesChanged, the
+   * flag on which importers such as fmusim restart (docs/fmu.md). */
+  int values_changed;
+  int next_event_time_defined; /* never: no time events */
+  double next_event_time;
+} nnfmu_event_info;
+
 /* Mode changes: enter event mode, update the (absent) discrete states, enter continuous-time mode. */
 NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller);
-/* *restart: whether an input or a tunable parameter changed since the event began (or since the last call), so
- * that the right-hand side jumped and the importer must restart its integrator: the wrappers report it as
- * valuesOfContinuousStatesChanged, the flag on which importers such as fmusim restart (docs/fmu.md). */
-NNFMU_INTERNAL nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, int *restart);
+NNFMU_INTERNAL nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller,
+                                                            nnfmu_event_info *info);
 NNFMU_INTERNAL nnfmu_status nnfmu_me_enter_continuous_time_mode(nnfmu_instance *inst, const char *caller);
-NNFMU_INTERNAL nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller);
+/* After an accepted integrator step: the model asks for no event (*enter_event_mode 0) and no end (*terminate 0). */
+NNFMU_INTERNAL nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller,
+                                                               int *enter_event_mode, int *terminate);
 /* sensitivity[i] = sum_j d unknowns[i] / d knowns[j] * seed[j] (value references; FMI 2 and 3 both use
  * 32-bit unsigned ones). */
 NNFMU_INTERNAL nnfmu_status nnfmu_me_directional_derivative(nnfmu_instance *inst, const char *caller,

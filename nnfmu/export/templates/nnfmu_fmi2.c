@@ -112,51 +112,44 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
   return fmi2OK;
 }
 
-/* Integer and Boolean: the parameters max_samples_per_step and input_range_error. */
+/* Integer and Boolean: the parameters max_samples_per_step and input_range_error. FMI 2 declares both
+ * fmi2Integer and fmi2Boolean as int, so one getter and one setter serve both types. */
+static fmi2Status get_ints(fmi2Component c, const char *caller, nnfmu_int_type type, const fmi2ValueReference vr[],
+                           size_t nvr, int value[]) {
+  size_t i;
+  long long v;
+  CHECK_INSTANCE();
+  NOT_NULL(caller, vr, nvr);
+  NOT_NULL(caller, value, nvr);
+  for (i = 0; i < nvr; ++i) {
+    if (nnfmu_get_int(INSTANCE, caller, type, vr[i], &v) != NNFMU_OK) return fmi2Error;
+    value[i] = type == NNFMU_BOOLEAN ? (v ? fmi2True : fmi2False) : (int)v;
+  }
+  return fmi2OK;
+}
+
+static fmi2Status set_ints(fmi2Component c, const char *caller, nnfmu_int_type type, const fmi2ValueReference vr[],
+                           size_t nvr, const int value[]) {
+  size_t i;
+  CHECK_INSTANCE();
+  NOT_NULL(caller, vr, nvr);
+  NOT_NULL(caller, value, nvr);
+  for (i = 0; i < nvr; ++i)
+    if (nnfmu_set_int(INSTANCE, caller, type, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
+  return fmi2OK;
+}
+
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
-  size_t i;
-  long long v;
-  CHECK_INSTANCE();
-  NOT_NULL("fmi2GetInteger", vr, nvr);
-  NOT_NULL("fmi2GetInteger", value, nvr);
-  for (i = 0; i < nvr; ++i) {
-    if (nnfmu_get_int(INSTANCE, "fmi2GetInteger", NNFMU_INTEGER, vr[i], &v) != NNFMU_OK) return fmi2Error;
-    value[i] = (fmi2Integer)v;
-  }
-  return fmi2OK;
+  return get_ints(c, "fmi2GetInteger", NNFMU_INTEGER, vr, nvr, value);
 }
-
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
-  size_t i;
-  CHECK_INSTANCE();
-  NOT_NULL("fmi2SetInteger", vr, nvr);
-  NOT_NULL("fmi2SetInteger", value, nvr);
-  for (i = 0; i < nvr; ++i)
-    if (nnfmu_set_int(INSTANCE, "fmi2SetInteger", NNFMU_INTEGER, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
-  return fmi2OK;
+  return set_ints(c, "fmi2SetInteger", NNFMU_INTEGER, vr, nvr, value);
 }
-
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
-  size_t i;
-  long long v;
-  CHECK_INSTANCE();
-  NOT_NULL("fmi2GetBoolean", vr, nvr);
-  NOT_NULL("fmi2GetBoolean", value, nvr);
-  for (i = 0; i < nvr; ++i) {
-    if (nnfmu_get_int(INSTANCE, "fmi2GetBoolean", NNFMU_BOOLEAN, vr[i], &v) != NNFMU_OK) return fmi2Error;
-    value[i] = v ? fmi2True : fmi2False;
-  }
-  return fmi2OK;
+  return get_ints(c, "fmi2GetBoolean", NNFMU_BOOLEAN, vr, nvr, value);
 }
-
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
-  size_t i;
-  CHECK_INSTANCE();
-  NOT_NULL("fmi2SetBoolean", vr, nvr);
-  NOT_NULL("fmi2SetBoolean", value, nvr);
-  for (i = 0; i < nvr; ++i)
-    if (nnfmu_set_int(INSTANCE, "fmi2SetBoolean", NNFMU_BOOLEAN, vr[i], value[i]) != NNFMU_OK) return fmi2Error;
-  return fmi2OK;
+  return set_ints(c, "fmi2SetBoolean", NNFMU_BOOLEAN, vr, nvr, value);
 }
 
 /* String: this FMU has none. */

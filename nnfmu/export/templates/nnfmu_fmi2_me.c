@@ -11,16 +11,16 @@ fmi2Status fmi2EnterEventMode(fmi2Component c) {
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
-  int restart;
+  nnfmu_event_info info;
   CHECK_INSTANCE();
   NOT_NULL("fmi2NewDiscreteStates", eventInfo, 1);
-  if (nnfmu_me_update_discrete_states(INSTANCE, "fmi2NewDiscreteStates", &restart) != NNFMU_OK) return fmi2Error;
-  eventInfo->newDiscreteStatesNeeded = fmi2False; /* no discrete states, no time events */
-  eventInfo->terminateSimulation = fmi2False;
-  eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
-  eventInfo->valuesOfContinuousStatesChanged = restart ? fmi2True : fmi2False; /* inputs jumped: restart */
-  eventInfo->nextEventTimeDefined = fmi2False;
-  eventInfo->nextEventTime = 0.0;
+  if (nnfmu_me_update_discrete_states(INSTANCE, "fmi2NewDiscreteStates", &info) != NNFMU_OK) return fmi2Error;
+  eventInfo->newDiscreteStatesNeeded = info.discrete_states_need_update ? fmi2True : fmi2False;
+  eventInfo->terminateSimulation = info.terminate_simulation ? fmi2True : fmi2False;
+  eventInfo->nominalsOfContinuousStatesChanged = info.nominals_changed ? fmi2True : fmi2False;
+  eventInfo->valuesOfContinuousStatesChanged = info.values_changed ? fmi2True : fmi2False;
+  eventInfo->nextEventTimeDefined = info.next_event_time_defined ? fmi2True : fmi2False;
+  eventInfo->nextEventTime = info.next_event_time;
   return fmi2OK;
 }
 
@@ -35,9 +35,9 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
   CHECK_INSTANCE();
   NOT_NULL("fmi2CompletedIntegratorStep", enterEventMode, 1);
   NOT_NULL("fmi2CompletedIntegratorStep", terminateSimulation, 1);
-  *enterEventMode = fmi2False;
-  *terminateSimulation = fmi2False;
-  return (fmi2Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi2CompletedIntegratorStep");
+  /* fmi2Boolean is int: the core writes the flags directly */
+  return (fmi2Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi2CompletedIntegratorStep", enterEventMode,
+                                                        terminateSimulation);
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) {

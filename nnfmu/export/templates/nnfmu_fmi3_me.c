@@ -40,7 +40,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
   const char *caller = "fmi3UpdateDiscreteStates";
-  int restart;
+  nnfmu_event_info info;
   CHECK_INSTANCE();
   NOT_NULL(caller, discreteStatesNeedUpdate, 1);
   NOT_NULL(caller, terminateSimulation, 1);
@@ -48,13 +48,13 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
   NOT_NULL(caller, valuesOfContinuousStatesChanged, 1);
   NOT_NULL(caller, nextEventTimeDefined, 1);
   NOT_NULL(caller, nextEventTime, 1);
-  if (nnfmu_me_update_discrete_states(INSTANCE, caller, &restart) != NNFMU_OK) return fmi3Error;
-  *discreteStatesNeedUpdate = fmi3False; /* no discrete states, no time events */
-  *terminateSimulation = fmi3False;
-  *nominalsOfContinuousStatesChanged = fmi3False;
-  *valuesOfContinuousStatesChanged = restart ? fmi3True : fmi3False; /* inputs jumped: restart (nnfmu_core.h) */
-  *nextEventTimeDefined = fmi3False;
-  *nextEventTime = 0.0;
+  if (nnfmu_me_update_discrete_states(INSTANCE, caller, &info) != NNFMU_OK) return fmi3Error;
+  *discreteStatesNeedUpdate = info.discrete_states_need_update ? fmi3True : fmi3False;
+  *terminateSimulation = info.terminate_simulation ? fmi3True : fmi3False;
+  *nominalsOfContinuousStatesChanged = info.nominals_changed ? fmi3True : fmi3False;
+  *valuesOfContinuousStatesChanged = info.values_changed ? fmi3True : fmi3False;
+  *nextEventTimeDefined = info.next_event_time_defined ? fmi3True : fmi3False;
+  *nextEventTime = info.next_event_time;
   return fmi3OK;
 }
 
@@ -65,13 +65,17 @@ fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
+  int enter, terminate;
+  fmi3Status status;
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK_INSTANCE();
   NOT_NULL("fmi3CompletedIntegratorStep", enterEventMode, 1);
   NOT_NULL("fmi3CompletedIntegratorStep", terminateSimulation, 1);
-  *enterEventMode = fmi3False;
-  *terminateSimulation = fmi3False;
-  return (fmi3Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi3CompletedIntegratorStep");
+  status = (fmi3Status)nnfmu_me_completed_integrator_step(INSTANCE, "fmi3CompletedIntegratorStep", &enter,
+                                                           &terminate);
+  *enterEventMode = enter ? fmi3True : fmi3False;
+  *terminateSimulation = terminate ? fmi3True : fmi3False;
+  return status;
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {

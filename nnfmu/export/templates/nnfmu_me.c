@@ -160,10 +160,11 @@ nnfmu_status nnfmu_me_enter_event_mode(nnfmu_instance *inst, const char *caller)
   return NNFMU_OK;
 }
 
-nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, int *restart) {
-  if (require(inst, caller, MODE_EVENT) != NNFMU_OK) return NNFMU_ERROR; /* no discrete states, time events */
-  *restart = memcmp(inst->ode.u_event, inst->v.u, sizeof inst->v.u) != 0 ||
-             memcmp(inst->ode.p_event, inst->v.p, sizeof inst->v.p) != 0;
+nnfmu_status nnfmu_me_update_discrete_states(nnfmu_instance *inst, const char *caller, nnfmu_event_info *info) {
+  memset(info, 0, sizeof *info); /* no discrete states, no time events, nothing ends the simulation */
+  if (require(inst, caller, MODE_EVENT) != NNFMU_OK) return NNFMU_ERROR;
+  info->values_changed = memcmp(inst->ode.u_event, inst->v.u, sizeof inst->v.u) != 0 ||
+                         memcmp(inst->ode.p_event, inst->v.p, sizeof inst->v.p) != 0;
   event_begins(inst); /* once per change: the next call of the same event iteration reports no restart */
   return NNFMU_OK;
 }
@@ -174,7 +175,10 @@ nnfmu_status nnfmu_me_enter_continuous_time_mode(nnfmu_instance *inst, const cha
   return NNFMU_OK;
 }
 
-nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller) {
+nnfmu_status nnfmu_me_completed_integrator_step(nnfmu_instance *inst, const char *caller, int *enter_event_mode,
+                                                int *terminate) {
+  *enter_event_mode = 0; /* no state events, and the inputs' changes come with the importer's own events */
+  *terminate = 0;
   return require(inst, caller, MODE_CONTINUOUS);
 }
 
