@@ -118,3 +118,28 @@ def test_a_model_written_with_the_helpers_steps_through_its_kinks():
         np.testing.assert_allclose(jac[:, j], central, rtol=1e-5, atol=1e-9)
     states = system.simulate_states(x0, np.zeros((50, 1)))
     assert np.isfinite(states).all()
+
+
+def test_the_pages_overflow_model_has_an_exact_jacobian_at_its_kinks():
+    """docs/own-physics.md's example, run as written: at an empty lower tank, the rim and the pump's saturation,
+    CasADi's Jacobian of the ODE equals central differences."""
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "own-physics.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", page, flags=re.DOTALL) if "nnfmu.physics.smooth" in b)
+    scope: dict = {}
+    exec(block, scope)  # noqa: S102 - the page's own example
+    system = scope["tanks_overflow"]()
+    p = system.parameter_values()
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
+    f = ca.Function("f", [x, u], [system.ode(x, u, p)])
+    J = ca.Function("J", [x, u], [ca.jacobian(system.ode(x, u, p), ca.vertcat(x, u))])
+    for x0, u0 in (([0.1, 0.0], 3.0), ([0.3, 0.1], 3.0), ([0.2, 0.1], 8.0)):  # empty tank, at the rim, saturated
+        z0 = np.array([*x0, u0])
+        jac = np.asarray(J(z0[:2], z0[2]))
+        assert np.isfinite(jac).all()
+        for j in range(3):
+            h = np.eye(3)[j] * 1e-8
+            central = (np.asarray(f((z0 + h)[:2], (z0 + h)[2])) - np.asarray(f((z0 - h)[:2], (z0 - h)[2]))).ravel()
+            np.testing.assert_allclose(jac[:, j], central / 2e-8, rtol=1e-4, atol=1e-9)
