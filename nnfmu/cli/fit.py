@@ -23,8 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit a physics model's free parameters to a dataset (grey-box identification)",
                        description="Estimate the free parameters of a physics model from the training split by "
                                    "simulation error: free runs over windows of the records, each window's initial "
-                                   "state estimated, within the bounds; print the estimates with standard errors "
-                                   "and the NRMSE of the free run on every split; write the fitted model as JSON.")
+                                   "state estimated, within the bounds; print the estimates with standard errors, "
+                                   "which parameters the data cannot determine (and what to fix or tie), why the "
+                                   "solver stopped, and the NRMSE of the free run on train and validation (test "
+                                   "with --report-test); write the fitted model as JSON. A flagged fit exits 0.")
     p.add_argument("system", metavar="PHYSICS",
                    help="the model: a registered name (slider, valve, arm), FILE.py:NAME or a .json model")
     p.add_argument("--data", required=True, help="dataset folder (train fitted; valid scored, and test with "

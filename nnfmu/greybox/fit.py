@@ -118,11 +118,14 @@ def gauss_newton(problem, z: np.ndarray, cost: float) -> tuple[np.ndarray, float
 def standard_errors(problem, z: np.ndarray, cost: float) -> np.ndarray:
     """Gauss-Newton standard errors of the free parameters (n_f,), in their units (module docstring); Inf for
     a parameter in a direction the data do not see at all (:func:`nnfmu.greybox.identifiability.covariance`)."""
-    information, sigma2 = gauss_newton(problem, z, cost)
+    return _errors(*gauss_newton(problem, z, cost), problem.theta_scale)
+
+
+def _errors(information: np.ndarray, sigma2: float, theta_scale: np.ndarray) -> np.ndarray:
     if not np.isfinite(sigma2):
-        return np.full(problem.n_f, np.nan)
+        return np.full(len(theta_scale), np.nan)
     cov, null = covariance(information, sigma2)
-    return np.where(null, np.inf, problem.theta_scale * np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+    return np.where(null, np.inf, theta_scale * np.sqrt(np.clip(np.diag(cov), 0.0, None)))
 
 
 def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, compile: bool = False,
@@ -260,8 +263,8 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
     if best is None or best.z is None:
         raise ConfigError("every starting point gave NaN or Inf; give starts where the model's free run is finite")
     theta = problem.parameters(best.z)[unknowns.index]
-    errors = standard_errors(problem, best.z, best.cost)
-    information, sigma2 = gauss_newton(problem, best.z, best.cost)
+    information, sigma2 = gauss_newton(problem, best.z, best.cost)  # one Jacobian: the arm's takes a minute
+    errors = _errors(information, sigma2, problem.theta_scale)
     fitted = _fitted_system(system, unknowns, theta, dict(dataset.source))
     n_r = windows.n_w * length * len(system.outputs)
     parameters = {}
