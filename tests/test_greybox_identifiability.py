@@ -111,3 +111,16 @@ def test_many_parameters_print_only_the_strong_pairs():
     lines = describe(section)
     assert lines[0].startswith("strongest correlations: p7~p6 -0.99") and "p1~" not in lines[0]
     assert not any(line.startswith("correlation ") for line in lines)
+
+
+def test_each_pair_that_the_data_cannot_separate_is_one_flag():
+    """The robot's case: each joint's viscous and Coulomb friction nearly collinear, a well-determined third."""
+    rng = np.random.default_rng(1)
+    base = rng.standard_normal((400, 3))
+    J = np.column_stack([base[:, 0], base[:, 0] + 0.01 * rng.standard_normal(400),
+                         base[:, 1], base[:, 1] + 0.01 * rng.standard_normal(400), base[:, 2]])
+    names = ["f_vis1", "f_coul1", "f_vis2", "f_coul2", "m"]
+    section = identifiability_report(names, np.ones(5), np.ones(5), J.T @ J, 0.01)  # sigma 0.1: 5 % alone
+    assert sorted(sorted(f["parameters"]) for f in section["flags"]) == [["f_coul1", "f_vis1"], ["f_coul2", "f_vis2"]]
+    assert all(f["kind"] == "collinear" and "cannot be told apart" in f["message"] for f in section["flags"])
+    assert section["relative_std_error"]["m"] < RELATIVE_LIMIT
