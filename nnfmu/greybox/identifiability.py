@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RELATIVE_LIMIT", "GROUP_CORRELATION", "STRONG_CORRELATION", "NULL_RTOL", "parameter_information", "covariance",
-           "identifiability_report", "describe"]
+__all__ = ["RELATIVE_LIMIT", "GROUP_CORRELATION", "STRONG_CORRELATION", "NULL_RTOL", "parameter_information",
+           "covariance", "identifiability_report", "describe"]
 
 #: A parameter (or a direction) is flagged when its standard error exceeds this fraction of its value: its 95 %
 #: interval spans more than +-40 % of it.
