@@ -124,3 +124,12 @@ def test_each_pair_that_the_data_cannot_separate_is_one_flag():
     assert sorted(sorted(f["parameters"]) for f in section["flags"]) == [["f_coul1", "f_vis1"], ["f_coul2", "f_vis2"]]
     assert all(f["kind"] == "collinear" and "cannot be told apart" in f["message"] for f in section["flags"])
     assert section["relative_std_error"]["m"] < RELATIVE_LIMIT
+
+
+def test_the_help_states_the_default_guard_that_the_solver_uses(capsys):
+    from nnfmu.greybox.solvers import DEFAULT_MAX_EVALUATIONS
+
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"until converged, at most {DEFAULT_MAX_EVALUATIONS}" in text and "--report-test" in text
