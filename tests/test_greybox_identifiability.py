@@ -54,6 +54,7 @@ def test_redundant_parameters_are_flagged_by_name_with_the_fix_and_the_fit_exits
     assert "a2" not in flags[0].replace("a1 and", "") and "k_p" not in flags[0]
     section = report["identifiability"]
     assert [sorted(f["parameters"]) for f in section["flags"]] == [["A1", "a1"]]
+    assert describe(section)[-1] == flags[0]  # a script reads the same lines back from the file
     assert section["limits"]["relative_std_error"] == RELATIVE_LIMIT
     weakest = section["weak_directions"][0]
     assert set(n for n, c in weakest["components"].items() if abs(c) > 0.3) == {"A1", "a1"}

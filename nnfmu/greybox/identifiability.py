@@ -149,21 +149,22 @@ def _and(names: list[str]) -> str:
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
-def _percent(x: float) -> str:
-    """``+-58.6 %``, ``+-1.5e+04 %``, ``+-inf``."""
-    return "+-inf" if not np.isfinite(x) else f"+-{100 * x:.3g} %"
+def _percent(x: float | None) -> str:
+    """``+-58.6 %``, ``+-1.5e+04 %``, ``+-inf`` (also for None: an infinite figure read back from JSON)."""
+    return "+-inf" if x is None or not np.isfinite(x) else f"+-{100 * x:.3g} %"
 
 
 def describe(section: dict, *, most_pairs: int = 10) -> list[str]:
     """Lines for a person: the correlations (the matrix up to 6 parameters, else the strongest pairs), the
-    weakest direction, and one line per flag (each starting ``"identifiability: "``)."""
+    weakest direction, and one line per flag (each starting ``"identifiability: "``). ``section``: as
+    :func:`identifiability_report` returns it, or read back from a fit file."""
     names, corr = section["parameters"], np.asarray(section["correlation"], dtype=float)
     lines = []
     if 1 < len(names) <= 6:
-        width = max(8, *map(len, names))
-        lines.append("correlation " + " ".join(f"{n:>{width}}" for n in names[:-1]))
+        width, label = max(8, *map(len, names)), max(11, *map(len, names))
+        lines.append(f"{'correlation':<{label}} " + " ".join(f"{n:>{width}}" for n in names[:-1]))
         for i, n in enumerate(names[1:], start=1):
-            lines.append(f"{n:<11} " + " ".join(f"{corr[i, j]:>+{width}.3f}" for j in range(i)))
+            lines.append(f"{n:<{label}} " + " ".join(f"{corr[i, j]:>+{width}.3f}" for j in range(i)))
     elif len(names) > 6:
         pairs = sorted(((abs(corr[i, j]), i, j) for i in range(len(names)) for j in range(i)), reverse=True)
         strong = [(i, j) for c, i, j in pairs if c >= STRONG_CORRELATION][:most_pairs]
