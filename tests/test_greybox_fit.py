@@ -51,7 +51,7 @@ def data(tmp_path_factory):
 @pytest.fixture(scope="module")
 def fitted(data):
     config = FitConfig(free=("m", "d"), start={"m": 1.6, "d": 1.3}, window=100)
-    return fit_greybox(slider_system(), data[0], config)
+    return fit_greybox(slider_system(), data[0], config, score_test=True)
 
 
 def test_the_fit_recovers_m_and_d_within_two_standard_errors(fitted):
@@ -86,9 +86,10 @@ def test_standard_errors_are_the_parameter_block_of_the_whole_gauss_newton_covar
 def test_nnfmu_fit_prints_the_estimates_and_writes_a_file_that_reloads(data, fitted, tmp_path, capsys):
     out = tmp_path / "fit.json"
     assert main(["fit", "slider", "--data", str(data[1]), "--free", "m,d", "--start", "m=1.6,d=1.3",
-                 "--window", "100", "--quiet", "-o", str(out)]) == 0
+                 "--window", "100", "--quiet", "--report-test", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "std error" in printed and "test: NRMSE" in printed
+    assert "identifiability:" not in printed and "solver: converged" in printed  # well posed: no flag
     doc = json.loads(out.read_text())
     assert doc["format"] == "nnfmu-greybox-fit/1" and set(doc["fit"]["parameters"]) == {"m", "d"}
     again = system_from_document(doc["physics"])

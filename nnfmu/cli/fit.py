@@ -5,8 +5,11 @@ data); networks are *trained* (``nnfmu train``) and the linear model *identified
 so the word is free, and the model named after it says what is fitted.
 
 Estimates the free parameters (:func:`nnfmu.greybox.fit_greybox`), prints each with its unit and standard
-error and the NRMSE / RMSE / fit % per split, and writes the fitted model as JSON, which ``nnfmu export
-FIT.json -o X.fmu`` turns into an FMU and every ``--physics`` option takes as a model.
+error, their correlations and weakest direction, a line per parameter the data do not determine (with the
+fix: ``--fixed``, or a tie in the model; :mod:`nnfmu.greybox.identifiability`), why the solver stopped, and
+the NRMSE / RMSE / fit % on train and validation (test with ``--report-test``), and writes the fitted model
+as JSON, which ``nnfmu export FIT.json -o X.fmu`` turns into an FMU and every ``--physics`` option takes as
+a model. A flagged fit still exits 0: the file is written, and the lines say what to change.
 """
 
 from __future__ import annotations
@@ -20,11 +23,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="fit a physics model's free parameters to a dataset (grey-box identification)",
                        description="Estimate the free parameters of a physics model from the training split by "
                                    "simulation error: free runs over windows of the records, each window's initial "
-                                   "state estimated, within the bounds; print the estimates with standard errors "
-                                   "and the NRMSE of the free run on every split; write the fitted model as JSON.")
+                                   "state estimated, within the bounds; print the estimates with standard errors, "
+                                   "which parameters the data cannot determine (and what to fix or tie), why the "
+                                   "solver stopped, and the NRMSE of the free run on train and validation (test "
+                                   "with --report-test); write the fitted model as JSON. A flagged fit exits 0.")
     p.add_argument("system", metavar="PHYSICS",
                    help="the model: a registered name (slider, valve, arm), FILE.py:NAME or a .json model")
-    p.add_argument("--data", required=True, help="dataset folder (train fitted; valid and test scored)")
+    p.add_argument("--data", required=True, help="dataset folder (train fitted; valid scored, and test with "
+                   "--report-test)")
     p.add_argument("-o", "--out", required=True, help="the fitted model to write (.json)")
     p.add_argument("--free", metavar="A,B", help="parameters to estimate (default: the model's free parameters)")
     p.add_argument("--fixed", metavar="C,D", help="parameters to hold at their values")
@@ -43,8 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="trf (default): SciPy's trust-region least squares on the exact Jacobian; ipopt: CasADi's "
                         "IPOPT with the same Gauss-Newton Hessian (slower on the slider and the valve; "
                         "docs/greybox.md)")
-    p.add_argument("--max-evaluations", type=int, default=100, metavar="N",
-                   help="residual evaluations (trf) or iterations (ipopt) per start (default 100)")
+    p.add_argument("--max-evaluations", type=int, metavar="N",
+                   help="residual evaluations (trf) or iterations (ipopt) per start (default: until converged, "
+                        "at most 1000; the fit says why it stopped)")
     p.add_argument("--n-sub", type=int, metavar="N", help="RK4 sub-steps per sample (default: the model's own)")
     p.add_argument("--max-windows", type=int, metavar="N",
                    help="fit on at most N windows spread evenly over the training split (default: all); for "
@@ -52,6 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compile", choices=["auto", "on", "off"], default="auto",
                    help="run the windows' free runs and sensitivities as compiled C: auto (default) for large "
                         "models (the ODE's instructions times the sub-steps from 20,000, as the arm), same values")
+    p.add_argument("--report-test", action="store_true",
+                   help="also score the test split (default: train and validation only; choose on validation, "
+                        "and look at test for the model finally chosen)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -98,6 +108,8 @@ def parse_bounds(items: list[str] | None) -> dict:
 
 
 def _summary(system, report: dict) -> list[str]:
+    from nnfmu.greybox.identifiability import describe
+
     lines = [f"{'parameter':<12} {'value':>12} {'std error':>10}  unit"]
     for name, row in report["parameters"].items():
         flag = "  (at a bound)" if row["at_bound"] else ""
@@ -108,7 +120,10 @@ def _summary(system, report: dict) -> list[str]:
             continue
         rmse = ", ".join(f"{n} {o['rmse']:.4g} {o.get('unit', '')}".rstrip() for n, o in s["outputs"].items())
         lines.append(f"{split}: NRMSE {s['nrmse']:.4f}, fit {s['fit_percent']:.1f} %, RMSE {rmse}")
-    lines += report["notes"]
+    if report.get("identifiability"):
+        lines += describe(report["identifiability"])
+    lines.append(f"solver: {report['stopped']}")
+    lines += [n for n in report["notes"] if not n.startswith(f"the {report['solver']} solver ")]
     spread = (f" (of {report['windows_in_split']}, spread over the training split)"
               if report["windows"] < report["windows_in_split"] else "")
     lines.append(f"{len(report['starts'])} start(s), {report['windows']} windows{spread} of {report['window']} "
@@ -137,7 +152,7 @@ def _run(args: argparse.Namespace) -> int:
     system = resolve_physics(args.system)
     dataset = load_dataset(args.data)
     print(f"fit: {system.name} on {args.data} by {args.solver}, {args.starts} start(s)", flush=True)
-    fit = fit_greybox(system, dataset, config, progress=not args.quiet)
+    fit = fit_greybox(system, dataset, config, progress=not args.quiet, score_test=args.report_test)
     print("\n".join(_summary(fit.system, fit.report)))
     print(f"wrote {save_fit(out, fit.system, {**fit.report, 'data': str(args.data)})}")
     return 0

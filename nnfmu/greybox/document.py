@@ -3,6 +3,9 @@
 ``physics`` is :func:`nnfmu.physics.system_to_document` of the fitted model (each free parameter's
 ``start`` is its estimate), so the file needs neither the user's model file nor any Python of theirs to
 be loaded again; ``nnfmu export FIT.json`` and ``nnfmu.physics.resolve_physics("FIT.json")`` read it.
+``fit`` is the report, which a script reads for the estimates, the scores, why the solver stopped
+(``converged``, ``stopped``) and ``identifiability`` (``flags``: each with ``kind``, ``parameters`` and
+``message``; ``correlation``, ``weak_directions``, ``relative_std_error``; an infinite figure is ``null``).
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nnfmu.errors import ConfigError
+from nnfmu.greybox.identifiability import covariance, identifiability_report, parameter_information
 from nnfmu.greybox.problem import Windows, build_problem, cut_windows, theta_scales
 from nnfmu.greybox.setup import Unknowns, check_dataset, choose_unknowns, spread_starts
 from nnfmu.greybox.solvers import SOLVERS, solve
@@ -33,7 +34,8 @@ from nnfmu.physics.base import PhysicsSystem
 from nnfmu.physics.compiled import compile_function
 from nnfmu.progress import tqdm
 
-__all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "standard_errors", "score_system", "COMPILE_CHOICES"]
+__all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "gauss_newton", "standard_errors", "score_system",
+           "COMPILE_CHOICES"]
 
 COMPILE_CHOICES = ("auto", "on", "off")
 
@@ -58,8 +60,9 @@ class FitConfig:
         Seeds the random starting points.
     solver : str
         ``"trf"`` (default) or ``"ipopt"`` (:mod:`nnfmu.greybox.solvers`).
-    max_evaluations : int
-        Residual evaluations (trf) or iterations (IPOPT) per start.
+    max_evaluations : int, optional
+        Residual evaluations (trf) or iterations (IPOPT) per start. None (default): until the solver converges,
+        within :data:`~nnfmu.greybox.solvers.DEFAULT_MAX_EVALUATIONS`; the report says why it stopped.
     n_sub : int, optional
         RK4 sub-steps per sample (default the model's own).
     max_windows : int, optional
@@ -79,7 +82,7 @@ class FitConfig:
     starts: int = 1
     seed: int = 0
     solver: str = "trf"
-    max_evaluations: int = 100
+    max_evaluations: int | None = None
     n_sub: int | None = None
     max_windows: int | None = None
     compile: str = "auto"
@@ -103,23 +106,32 @@ class GreyboxFit:
     report: dict
 
 
-def standard_errors(problem, z: np.ndarray, cost: float) -> np.ndarray:
-    """Gauss-Newton standard errors of the free parameters (n_f,), in their units (module docstring)."""
+def gauss_newton(problem, z: np.ndarray, cost: float) -> tuple[np.ndarray, float]:
+    """``(information, sigma2)``: the free parameters' information in the scaled unknowns (n_f, n_f; the
+    windows' initial states eliminated) and the residuals' variance ``2 cost / (n_r - n_z)`` (NaN if n_r <= n_z)."""
     dt, dx = problem.blocks(z)
-    n_r, n_z = dt.shape[0] * dt.shape[1], problem.n_z
-    if n_r <= n_z:
-        return np.full(problem.n_f, np.nan)
-    sigma2 = 2.0 * cost / (n_r - n_z)
-    schur = np.einsum("wri,wrj->ij", dt, dt)
-    for a, b in zip(dt, dx):
-        coupling = a.T @ b
-        schur -= coupling @ np.linalg.pinv(b.T @ b) @ coupling.T
-    covariance = sigma2 * np.linalg.pinv(schur)
-    return problem.theta_scale * np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    n_r = dt.shape[0] * dt.shape[1]
+    sigma2 = 2.0 * cost / (n_r - problem.n_z) if n_r > problem.n_z else np.nan
+    return parameter_information(dt, dx), sigma2
 
 
-def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, compile: bool = False) -> dict:
-    """``{split: scores}``: the free run of every record from its first sample, NRMSE / RMSE / fit % per split.
+def standard_errors(problem, z: np.ndarray, cost: float) -> np.ndarray:
+    """Gauss-Newton standard errors of the free parameters (n_f,), in their units (module docstring); Inf for
+    a parameter in a direction the data do not see at all (:func:`nnfmu.greybox.identifiability.covariance`)."""
+    return _errors(*gauss_newton(problem, z, cost), problem.theta_scale)
+
+
+def _errors(information: np.ndarray, sigma2: float, theta_scale: np.ndarray) -> np.ndarray:
+    if not np.isfinite(sigma2):
+        return np.full(len(theta_scale), np.nan)
+    cov, null = covariance(information, sigma2)
+    return np.where(null, np.inf, theta_scale * np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+
+
+def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, compile: bool = False,
+                 splits=None) -> dict:
+    """``{split: scores}``: the free run of every record from its first sample, NRMSE / RMSE / fit % per split
+    (``splits``: the names to score, default every split of ``dataset``).
 
     ``compile``: the RK4 step runs as compiled C (same values; the arm's 36,300 training samples took 4 minutes
     in CasADi's virtual machine).
@@ -129,6 +141,8 @@ def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, co
         model = dataclasses.replace(model, step=compile_function(model.step))
     out = {}
     for name, split in dataset.splits.items():
+        if splits is not None and name not in splits:
+            continue
         predictions = [model.simulate(u, y[0]) for u, y in zip(split.u, split.y)]
         if not all(np.isfinite(p).all() for p in predictions):
             out[name] = {"nrmse": None, "note": "the free run diverged (NaN or Inf)"}
@@ -188,7 +202,7 @@ def _run_starts(system, problem, windows, unknowns, config, progress):
                                 max_evaluations=config.max_evaluations, report=report)
             runs.append({"start": dict(zip(unknowns.names, map(float, theta))), "cost": outcome.cost,
                          "evaluations": outcome.evaluations, "seconds": round(outcome.seconds, 3),
-                         "status": outcome.status, "notes": outcome.notes,
+                         "status": outcome.status, "stopped": outcome.reason, "notes": outcome.notes,
                          "end": dict(zip(unknowns.names, map(float, problem.parameters(outcome.z)[unknowns.index])))})
             if best is None or outcome.cost < best.cost:
                 best = outcome
@@ -204,7 +218,7 @@ def _parameters_at(problem, theta: np.ndarray) -> np.ndarray:
 
 
 def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None, *,
-                progress: bool = False) -> GreyboxFit:
+                progress: bool = False, score_test: bool = False) -> GreyboxFit:
     """Estimate ``system``'s free parameters from ``dataset``'s training split (module docstring).
 
     Parameters
@@ -213,16 +227,20 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
         The model, e.g. ``nnfmu.physics.resolve_physics("slider")``.
     dataset : nnfmu.data.Dataset
         Inputs and outputs named and in units as the model's, at its sample time; ``train`` is fitted,
-        ``valid`` and ``test`` (if present) only scored.
+        ``valid`` (if present) only scored.
     config : FitConfig
     progress : bool
         A bar over the starting points, with the evaluations and the cost of the current one.
+    score_test : bool
+        Score the ``test`` split too (default False: a fit is judged on validation; the test split is for the
+        model finally chosen, ``nnfmu fit --report-test``).
 
     Returns
     -------
     GreyboxFit
         ``.system``: the model with the estimates as its parameters' starts; ``.report``: values, standard
-        errors, scores per split, the starts tried and the seconds taken.
+        errors, ``identifiability`` (:func:`nnfmu.greybox.identifiability_report`), why the solver
+        stopped (``converged``, ``stopped``), scores per split, the starts tried and the seconds taken.
     """
     t0 = time.perf_counter()
     config = config or FitConfig()
@@ -245,7 +263,8 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
     if best is None or best.z is None:
         raise ConfigError("every starting point gave NaN or Inf; give starts where the model's free run is finite")
     theta = problem.parameters(best.z)[unknowns.index]
-    errors = standard_errors(problem, best.z, best.cost)
+    information, sigma2 = gauss_newton(problem, best.z, best.cost)  # one Jacobian: the arm's takes a minute
+    errors = _errors(information, sigma2, problem.theta_scale)
     fitted = _fitted_system(system, unknowns, theta, dict(dataset.source))
     n_r = windows.n_w * length * len(system.outputs)
     parameters = {}
@@ -261,8 +280,11 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
               "n_sub": n_sub, "compiled": compiled, "residuals": n_r, "unknowns": problem.n_z, "cost": best.cost,
               "residual_rms": float(np.sqrt(2.0 * best.cost / n_r)), "parameters": parameters,
               "fixed": {v.name: v.start for i, v in enumerate(system.parameters) if i not in set(unknowns.index)},
-              "starts": runs, "notes": best.notes,
-              "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled)}
+              "starts": runs, "notes": best.notes, "converged": best.converged, "stopped": best.reason,
+              "identifiability": (identifiability_report(unknowns.names, theta, problem.theta_scale, information,
+                                                         sigma2) if np.isfinite(sigma2) else None),
+              "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled,
+                                     splits=None if score_test else ("train", "valid"))}
     report["seconds"] = round(time.perf_counter() - t0, 3)
     return GreyboxFit(system=fitted, report=report)
 
