@@ -42,6 +42,7 @@ from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import join_sequences, validation_trajectories
 from nnfmu.training.increments import prepare_increment
 from nnfmu.training.linear_start import start_linear_path
+from nnfmu.training.physics_schedule import STAGED_LR
 from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
 from nnfmu.valid_range import training_range
@@ -309,6 +310,7 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
                 session.save()
             _show(bar, entry)
             advance(bar, session.epoch)
+            _next_stage(session, bar, deadline)
             if callback is not None:
                 try:
                     callback(session.epoch, dict(entry))
@@ -318,6 +320,17 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
             if early:
                 return "time-budget"
         return "early-stopping" if session.patience_exhausted() else "epochs"
+
+
+def _next_stage(session: Session, bar, deadline: float | None) -> None:
+    """``physics_schedule='staged'``: the physical parameters join the training when their frozen stage ends."""
+    cfg = session.cfg
+    budget = None if deadline is None else (deadline - 60.0 * cfg.max_minutes, deadline)
+    if session.schedule.due(session.epoch, cfg.epochs, budget, session.patience_exhausted()):
+        session.schedule.start_joint()
+        session.bad_epochs = 0  # the joint stage gets its own patience
+        bar.write(f"epoch {session.epoch}: the physical parameters train from here on (staged schedule), at "
+                  f"{STAGED_LR:g} times the learning rate")
 
 
 def _save_quietly(session: Session) -> None:
