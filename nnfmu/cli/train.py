@@ -190,7 +190,8 @@ def run_one(plan: TrainPlan) -> int:
     request, out = plan.request, plan.out
     try:
         result = train(plan.data, plan.model_config, plan.train_config, out=out, resume=request.resume,
-                       progress=plan.progress, device=plan.device, threads=request.threads, linear=plan.linear)
+                       progress=plan.progress, device=plan.device, threads=request.threads, linear=plan.linear,
+                       say=lambda line: print(line, flush=True))
     except BaseException:
         if not request.resume:  # a failed command leaves nothing at --out unless an epoch finished
             remove_if_untrained(out)
