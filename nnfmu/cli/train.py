@@ -24,7 +24,6 @@ after the parse gets the plan.
 from __future__ import annotations
 
 import argparse
-
 from pathlib import Path
 
 from nnfmu.cli import _arch
