@@ -103,6 +103,8 @@ def test_the_hybrid_at_its_defaults_is_never_worse_on_validation_than_its_starti
     assert _valid(kept, ds) <= _valid(start, ds) * (1 + 1e-9)
     best = load_checkpoint(out)["best_epoch"]
     assert (best == 0) is ("the kept weights are the physics' as given, its correction at zero" in printed)
+    assert (best > 0) is (f"start: the physics as given, its correction at zero, validation free-run NRMSE "
+                          f"{_valid(start, ds):.4f}" in printed)  # what the hybrid gained over its start, on validation
     assert (best == 0) is (case == "exact")  # the rule was needed where training can only lose, and only there
 
 
