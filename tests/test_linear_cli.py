@@ -96,7 +96,7 @@ def test_one_record_holds_out_the_tail_train_holds_out_so_networks_start_from_th
     held = load_linear(tmp_path / "held.json")
 
     loaded = load_dataset(data)
-    _, _, _, start = prepare(loaded, ModelConfig(arch="gru", n_u=2, n_y=2), TrainConfig(), {})  # `nnfmu train --arch gru`
+    _, _, _, start = prepare(loaded, ModelConfig(arch="gru", n_u=2, n_y=2), TrainConfig(), {})  # --arch gru
     for name in ("A", "B", "C", "d"):
         np.testing.assert_array_equal(getattr(held.system, name), getattr(start.system, name))
 

@@ -114,7 +114,7 @@ def report_end(result, linear) -> None:
               "a larger budget (--epochs or --max-minutes) may help")
     if result.best_epoch == 0:
         print(f"the training never improved on its start on validation: the kept weights are {_start(result, linear)}")
-    elif getattr(result.model, "physics", None) is not None:  # a hybrid: what it gained over the physics it started from
+    elif getattr(result.model, "physics", None) is not None:  # a hybrid: what it gained over its start
         print(f"start: the physics as given, its correction at zero, validation free-run NRMSE "
               f"{result.history[0]['valid_nrmse']:.4f} (the kept hybrid: {result.best_valid_nrmse:.4f})")
 

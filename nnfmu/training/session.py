@@ -136,8 +136,9 @@ class Session:
                 norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)
                 if not (torch.isfinite(loss) and torch.isfinite(norm)):
                     self._diverged(float(loss.detach()), b)
-                for group in self.optimizer.param_groups:
-                    group["lr"] = cfg.lr * group.get("lr_scale", 1.0) * lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                factor = lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                for group in self.optimizer.param_groups:  # lr_scale: nnfmu.training.physics_schedule
+                    group["lr"] = cfg.lr * group.get("lr_scale", 1.0) * factor
                 self.optimizer.step()
                 self.average.after_step()
                 total += float(loss.detach()) * len(un)
