@@ -115,7 +115,8 @@ register_architecture(Architecture(
         Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",
                choices="nnfmu.physics.registry:physics_names", open_choices=True,
                help="the physics model the network corrects: a registered one (%(choices)s) or FILE.py:NAME, "
-                    "a model of your own"),
+                    "a model of your own; also FILE.json, a grey-box fit from 'nnfmu fit', which the hybrid starts "
+                    "from"),
         Option(flag="--physics-params", field="physics_params", metavar="FILE.json",
                parse="nnfmu.hybrid.config:load_physics_params",
                help="JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} "
