@@ -224,14 +224,18 @@ def test_sigterm_exits_with_143_and_keeps_the_checkpoint(work, tmp_path, capsys)
     assert out.is_file() and not list(tmp_path.glob(".*.tmp"))
 
 
+def _sigterm(*args):
+    os.kill(os.getpid(), signal.SIGTERM)
+
+
 def test_sigterm_outside_training_also_exits_with_143(work, tmp_path, capsys):
     """Before training starts, SIGTERM ends the command like Ctrl-C: clean-up runs, nothing is left."""
-    import nnfmu.cli.train as train_cli
+    import nnfmu.cli._train_plan as train_plan
 
     out = tmp_path / "m.pt"
     previous = signal.signal(signal.SIGTERM, lambda *_: None)
     try:
-        with mock.patch.object(train_cli, "_model_config", side_effect=lambda *a: os.kill(os.getpid(), signal.SIGTERM)):
+        with mock.patch.object(train_plan, "_model_config", side_effect=_sigterm):
             status = nnfmu_main(["train", "--data", str(work["data"]), *TRAIN, "--out", str(out)])
     finally:
         signal.signal(signal.SIGTERM, previous)

@@ -67,7 +67,8 @@ def fmus(tmp_path_factory):
     built = {}
     for case, (version, names, options) in CASES.items():
         built[case] = folder / f"{case}.fmu"
-        argv = [str(checkpoint), "-o", str(built[case]), "--fmi-version", str(version), "--platforms", names]
+        argv = [str(checkpoint), "-o", str(built[case]), "--name", "valve_gru", "--fmi-version", str(version),
+                "--platforms", names]
         assert export_main([*argv, *options]) == 0
     return built
 

@@ -95,11 +95,8 @@ def test_one_record_holds_out_the_tail_train_holds_out_so_networks_start_from_th
     assert f"the last {valid_fraction(one):.0%} of the record" in out and "free-run NRMSE on valid" in out
     held = load_linear(tmp_path / "held.json")
 
-    class Args:  # what `nnfmu train --data D --arch gru` passes to its plan
-        linear_path, increment = "auto", None
-
     loaded = load_dataset(data)
-    _, _, _, start = prepare(Args(), loaded, ModelConfig(arch="gru", n_u=2, n_y=2), TrainConfig(), {})
+    _, _, _, start = prepare(loaded, ModelConfig(arch="gru", n_u=2, n_y=2), TrainConfig(), {})  # --arch gru
     for name in ("A", "B", "C", "d"):
         np.testing.assert_array_equal(getattr(held.system, name), getattr(start.system, name))
 

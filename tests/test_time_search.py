@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import time
 import types
+from pathlib import Path
 
 import pytest
 
+from nnfmu.cli._train_plan import TrainPlan, TrainRequest
 from nnfmu.cli._train_search import applies, given_options, print_table, run_search
 from nnfmu.errors import ConfigError
 from nnfmu.models import ModelConfig, load_checkpoint
@@ -16,12 +17,20 @@ from nnfmu.training import TrainConfig
 from tests.test_linear import dataset, true_system
 
 
-def _args(**changes) -> argparse.Namespace:
-    """The namespace ``nnfmu train`` parses, for ``--max-minutes`` alone unless ``changes`` say otherwise."""
-    base = dict(arch=None, hidden=None, layers=None, window=None, dropout=None, init_window=None, lr=None,
-                feedback_noise=None, truncate=None, max_minutes=0.5, epochs=None, patience=None, seeds=None,
-                resume=False, increment=None, quiet=True, linear_path="auto")
-    return argparse.Namespace(**{**base, **changes})
+_MODEL = ("hidden", "layers", "window", "dropout", "init_window")
+
+
+def _args(**changes) -> TrainRequest:
+    """What ``nnfmu train`` asks for ``--max-minutes`` alone (``--max-minutes 0.5``) unless ``changes`` say
+    otherwise (the argparse dests; None: left out)."""
+    base = dict(arch=None, max_minutes=0.5, seeds=None, resume=False, increment=None, quiet=True)
+    values = {**base, **changes}
+    own = {"arch", "seeds", "resume", "increment", "quiet"}
+    options = {k: v for k, v in values.items() if k not in own and v is not None}
+    return TrainRequest(data="d", out=Path("m.pt"), arch=values["arch"], seeds=values["seeds"],
+                        resume=values["resume"], increment=values["increment"], quiet=values["quiet"],
+                        model_options={k: v for k, v in options.items() if k in _MODEL},
+                        train_options={k: v for k, v in options.items() if k not in _MODEL})
 
 
 @pytest.mark.parametrize("changes, searches", [
@@ -204,7 +213,9 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(time_search, "search_for", recorded_search)
         mp.setattr(time_search, "again", lambda *a: None)  # no further seeds: the search ends with its 3 points
-        assert run_search(args, ds, model, train, out, types.SimpleNamespace(type="cpu"), None, given) == 0
+        plan = TrainPlan(args.replace(out=out), ds, model, train, types.SimpleNamespace(type="cpu"), search=True,
+                         given=frozenset(given))
+        assert run_search(plan) == 0
     (result,) = results
     rows = result.rows
     assert [r["trial"] for r in rows] == [0, 1, 2] and {r["lr"] for r in rows} == {1e-3, 3e-3, 1e-2}

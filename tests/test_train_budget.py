@@ -23,7 +23,7 @@ def data_dir(valve_small, tmp_path_factory):
 def test_max_minutes_alone_is_the_only_limit(data_dir, tmp_path, capsys, monkeypatch):
     """Where the search does not apply (the hybrid's record), --max-minutes alone trains one network until the
     budget is spent."""
-    monkeypatch.setattr("nnfmu.cli.train.search_applies", lambda args: False)
+    monkeypatch.setattr("nnfmu.cli._train_plan.search_applies", lambda args: False)
     out = tmp_path / "m.pt"
     assert main(["train", "--data", str(data_dir), "--arch", "mlp", "--hidden", "4", "--truncate", "30",
                  "--max-minutes", "0.03", "-o", str(out)]) == 0

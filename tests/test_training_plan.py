@@ -180,7 +180,7 @@ def test_train_cli_at_its_defaults_trains_a_seed_per_core_and_keeps_them_by_vali
     best on validation, joined by the other only where their ensemble is 1 % better on validation (issue 38: never
     chosen on test); --seeds 1 and --epochs train one."""
     from nnfmu.cli import main
-    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS, planned_seeds
+    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS, TrainRequest, planned_seeds
     from nnfmu.data import save_dataset
     from nnfmu.models import ModelConfig, load_checkpoint
     from nnfmu.training import resources
@@ -203,13 +203,10 @@ def test_train_cli_at_its_defaults_trains_a_seed_per_core_and_keeps_them_by_vali
     assert summary["best_valid_nrmse"] <= (0.99 * best if averaged else best) + 1e-9  # the margin, on validation
     assert summary["best_valid_nrmse"] <= min(r["start_valid_nrmse"] for r in summary["seeds"]) + 1e-9
 
-    class Args:  # what planned_seeds reads of `nnfmu train` at its defaults
-        seeds = resume = increment = None
-        threads = 1
-
+    at_defaults = TrainRequest(data="d", out=tmp_path / "b.pt", threads=1)  # `nnfmu train` at its defaults
     for cores, seeds in ((16, MAX_PLANNED_SEEDS), (5, 5), (2, 2), (1, None)):
         monkeypatch.setattr(resources, "usable_cores", lambda: cores)
-        assert planned_seeds(Args(), ModelConfig(arch="gru", n_u=1, n_y=1), {}, None) == seeds
+        assert planned_seeds(at_defaults, ModelConfig(arch="gru", n_u=1, n_y=1), {}, None) == seeds
     capsys.readouterr()
     monkeypatch.setattr(resources, "usable_cores", lambda: 2)
     from nnfmu.cli.info import describe, render

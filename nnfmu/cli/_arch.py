@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping
 
 from nnfmu.cli._checks import RULES, Rule
 from nnfmu.errors import ConfigError
@@ -79,24 +79,31 @@ def add_architecture_options(p: argparse.ArgumentParser) -> dict[str, list[Optio
     return {o.field: o for o in added.values()}
 
 
-def given(args: argparse.Namespace, record: Architecture) -> dict:
+def given(values: Mapping, record: Architecture) -> dict:
     """The options of architectures given on the command line, as ``record``'s config fields (parsed).
 
-    Options of other architectures are an error that names them.
+    ``values``: every architecture's own options that were given, by field (:func:`given_values`). Options of
+    other architectures are an error that names them.
     """
     own = {o.field: o for o in record.options}
     foreign = [o for r in architectures.records() if r.name != record.name for o in r.options
-               if o.field not in own and getattr(args, o.field, None) is not None]
+               if o.field not in own and values.get(o.field) is not None]
     if foreign:
         owners = sorted({r.name for r in architectures.records() for o in r.options if o in foreign})
         raise ConfigError(f"{', '.join(dict.fromkeys(o.flag for o in foreign))} only apply to "
                           f"--arch {' or '.join(owners)}; drop them or train that architecture")
     out = {}
     for field, option in own.items():
-        value = getattr(args, field, None)
+        value = values.get(field)
         if value is not None:
             out[field] = value if option.parse is None else architectures.resolve(option.parse)(value)
     return out
+
+
+def given_values(args: argparse.Namespace) -> dict:
+    """Every registered architecture's own options given in ``args`` (as typed), by field."""
+    fields = {o.field for r in architectures.records() for o in r.options}
+    return {f: getattr(args, f) for f in fields if getattr(args, f, None) is not None}
 
 
 def check_required(record: Architecture, given_fields) -> None:

@@ -1,4 +1,5 @@
-"""``nnfmu train`` at its defaults: the linear path and the training choices made from the data.
+"""``nnfmu train``'s plan stage: what the command line asked (:class:`TrainRequest`) becomes what will run
+(:class:`TrainPlan`), every check done and every choice made and printed before training starts.
 
 For an architecture whose record asks for it (``Architecture.data_plan``): without ``--linear-path off``
 (and without ``--increment``) every network that may sit on a linear path starts on one
@@ -19,15 +20,196 @@ seeds 0.0066 against 0.0155 it kept a model 2.7 times worse on test than the bet
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nnfmu.cli import _arch
+from nnfmu.cli._resources import check_resource_options
+from nnfmu.cli._train_search import applies as search_applies
+from nnfmu.cli._train_search import given_options
+from nnfmu.limits import UNBOUNDED_EPOCHS
 
 #: The fewest seeds the plan trains side by side (when the cores allow at least this many), and the most.
 DEFAULT_SEEDS = 2
 MAX_PLANNED_SEEDS = 8
 
 
-def prepare(args, ds, model_config, train_config, given: dict):
-    """``(dataset with its validation split, model_config, train_config, linear model or None)`` for a new run."""
+@dataclass(frozen=True)
+class TrainRequest:
+    """What the ``nnfmu train`` command line asked, options left out omitted (the parse stage's result).
+
+    ``model_options`` and ``train_options``: the ModelConfig and TrainConfig fields given (``join`` among the
+    latter); ``arch_options``: every architecture's own options given, as typed (``--physics``: a string).
+    """
+
+    data: str
+    out: Path
+    arch: str | None = None
+    strategy: str | None = None
+    model_options: dict = field(default_factory=dict)
+    train_options: dict = field(default_factory=dict)
+    arch_options: dict = field(default_factory=dict)
+    increment: str | None = None
+    linear_path: str = "auto"
+    seeds: int | None = None
+    keep: str | None = None
+    jobs: int | None = None
+    resume: bool = False
+    force: bool = False
+    quiet: bool = False
+    device: str = "auto"
+    threads: int | None = None
+    started: float = field(default_factory=time.monotonic)  # a --max-minutes search counts its budget from here
+
+    def replace(self, **changes) -> "TrainRequest":
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class TrainPlan:
+    """What ``nnfmu train`` runs: the data (with their validation split for a new run), both configs and the way
+    (``search``, ``increment_auto``, ``seeds``; else one training). ``given``: the options the user gave, which a
+    search keeps fixed."""
+
+    request: TrainRequest
+    data: Any
+    model_config: Any
+    train_config: Any
+    device: Any
+    linear: Any = None
+    seeds: int | None = None
+    search: bool = False
+    given: frozenset = frozenset()
+
+    @property
+    def out(self) -> Path:
+        return self.request.out
+
+    @property
+    def progress(self) -> bool:
+        return not self.request.quiet
+
+    def replace(self, **changes) -> "TrainPlan":
+        return dataclasses.replace(self, **changes)
+
+
+def make_plan(request: TrainRequest) -> TrainPlan:
+    """Check the request, load the data, build the configs and make the choices the user left to the data."""
+    from nnfmu.cli._checks import check_training_data
+    from nnfmu.cli._outputs import check_writable
+    from nnfmu.data import load_dataset
+    from nnfmu.errors import ConfigError
+    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most
+    from nnfmu.models import architectures, load_checkpoint
+    from nnfmu.models.size import check_network_size
+    from nnfmu.training.ensemble import seeds_folder
+
+    out = request.out
+    check_writable(out)  # before the data are loaded and the network built
+    device = check_resource_options(request)
+    ds = load_dataset(request.data)
+    if request.resume and not out.exists() and seeds_folder(out).is_dir():
+        raise ConfigError(f"{out} is written when its seeds in {seeds_folder(out)} are done: run the same command "
+                          "again without --resume, and the seeds continue")
+    stored = load_checkpoint(out) if request.resume else None
+    if stored is None and out.exists() and not request.force:
+        raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")
+    model_config = _model_config(request, ds, None if stored is None else stored["model_config"])
+    record = architectures.architecture(model_config.arch)
+    train_config = _train_config(request, None if stored is None else stored.get("train_config"), record)
+    check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
+    check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
+    check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
+    plan = TrainPlan(request, ds, model_config, train_config, device, seeds=request.seeds)
+    if stored is not None:
+        return plan
+    if out.exists():
+        _check_ours(out)
+    given = dict(request.train_options)
+    ds, model_config, train_config, linear = prepare(ds, model_config, train_config, given,
+                                                     linear_path=request.linear_path, increment=request.increment)
+    plan = plan.replace(data=ds, model_config=model_config, train_config=train_config, linear=linear,
+                        given=frozenset(given_options(request, given)))
+    if search_applies(request):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
+        return plan.replace(search=True)
+    return plan.replace(seeds=planned_seeds(request, model_config, given, device))
+
+
+def _train_config(request: TrainRequest, stored: dict | None, record):
+    from nnfmu.errors import ConfigError
+    from nnfmu.training import TrainConfig
+
+    changes = dict(request.train_options)
+    if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
+        changes.update(epochs=UNBOUNDED_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
+    if request.strategy is not None:
+        changes["strategy"] = request.strategy
+    if changes.get("strategy", record.strategies[0]) not in record.strategies:
+        raise ConfigError(f"a {record.name} model trains in {' or '.join(record.strategies)} mode only; drop "
+                          f"--strategy or pass --strategy {record.strategies[0]}")
+    base = TrainConfig.from_dict(stored) if stored else TrainConfig(strategy=record.strategies[0], dtype=record.dtype)
+    return base.replace(**changes)
+
+
+def _model_config(request: TrainRequest, ds, stored: dict | None):
+    from nnfmu.errors import ConfigError
+    from nnfmu.models import ModelConfig, architectures
+
+    given = dict(request.model_options)
+    if request.increment == "on":
+        given["increment"] = True
+    arch = request.arch or (stored or {}).get("arch") or architectures.search_order()[0]  # no --arch: searched
+    record = architectures.architecture(arch)
+    given.update(_arch.given(request.arch_options, record))  # the architecture's own options (its record's)
+    if stored is not None:
+        config = ModelConfig.from_dict(stored)
+        clash = {k: v for k, v in given.items() if _differs(config, k, v)}
+        if request.arch is not None and request.arch != config.arch:
+            clash["arch"] = request.arch
+        if clash:
+            raise ConfigError(f"--resume continues the stored model {config}; the options {clash} differ. "
+                              "Drop them, or train into a new --out file")
+        return config
+    if request.arch is None and not search_applies(request):
+        raise ConfigError(f"--arch is required ({', '.join(architectures.names())}) unless --resume or "
+                          "--max-minutes alone (a search over the architectures too) is given")
+    _arch.check_required(record, given)
+    return record.get("config_class")(arch=arch, n_u=ds.n_u, n_y=ds.n_y, **given)
+
+
+def _differs(config, key: str, value) -> bool:
+    """Whether a given option differs from the stored config (an architecture's own compared after normalising)."""
+    from nnfmu.errors import NnfmuError
+    from nnfmu.models import architectures
+
+    if key not in {o.field for o in architectures.architecture(config.arch).options}:
+        return getattr(config, key) != value
+    try:
+        return getattr(config.replace(**{key: value}), key) != getattr(config, key)
+    except NnfmuError:
+        return True
+
+
+def _check_ours(out) -> None:
+    """``--force`` overwrites a checkpoint nnfmu wrote, never another file."""
+    from nnfmu.errors import CheckpointError, DataFileError
+    from nnfmu.models import load_checkpoint
+
+    try:
+        load_checkpoint(out)
+    except CheckpointError as exc:
+        raise DataFileError(f"{out} is not an nnfmu checkpoint, so --force does not overwrite it; move it away or "
+                            "choose another --out") from exc
+
+
+def prepare(ds, model_config, train_config, given: dict, *, linear_path: str = "auto", increment: str | None = None):
+    """``(dataset with its validation split, model_config, train_config, linear model or None)`` for a new run.
+
+    ``given``: the TrainConfig fields the user gave; ``linear_path`` and ``increment``: ``--linear-path`` and
+    ``--increment``."""
     from nnfmu.models import architectures
     from nnfmu.training.plan import plan_training, valid_fraction, validation_line
     from nnfmu.training.trainer import prepare_dataset
@@ -46,7 +228,8 @@ def prepare(args, ds, model_config, train_config, given: dict):
     carved, notes = prepare_dataset(ds, train_config)
     for note in notes:
         print(f"note: {note}")
-    linear = _linear_start(args, carved, model_config, ds.train if ds.valid is None and ds.train.n_traj == 1 else None)
+    record = ds.train if ds.valid is None and ds.train.n_traj == 1 else None
+    linear = _linear_start(linear_path, increment, carved, model_config, record)
     if linear is not None:
         model_config = model_config.replace(linear_order=linear.n_x)
     plan = plan_training(ds, {**given, "valid_fraction": train_config.valid_fraction}, linear=linear,
@@ -56,7 +239,7 @@ def prepare(args, ds, model_config, train_config, given: dict):
     return carved, model_config, train_config.replace(**plan.changes), linear
 
 
-def _linear_start(args, ds, model_config, record=None):
+def _linear_start(linear_path: str, increment: str | None, ds, model_config, record=None):
     """The identified linear model the network starts from, or None (``--linear-path off``, increment mode).
 
     ``record``: the one training record the validation tail was cut from, which the linear model is refitted
@@ -64,14 +247,14 @@ def _linear_start(args, ds, model_config, record=None):
     from nnfmu.linear import LinearConfig, identify_linear, load_linear
     from nnfmu.models import architectures
 
-    if args.linear_path == "off" or not architectures.architecture(model_config.arch).linear_path:
+    if linear_path == "off" or not architectures.architecture(model_config.arch).linear_path:
         return None
-    if args.increment is not None or model_config.increment:
+    if increment is not None or model_config.increment:
         print("plan: no linear path (increment mode carries the output from step to step; --linear-path off)")
         return None
-    if args.linear_path != "auto":  # a linear model saved by `nnfmu linear --save FILE.json`
-        linear = load_linear(args.linear_path)
-        print(f"plan: linear path of {linear.n_x} states from {args.linear_path}; the network learns a correction "
+    if linear_path != "auto":  # a linear model saved by `nnfmu linear --save FILE.json`
+        linear = load_linear(linear_path)
+        print(f"plan: linear path of {linear.n_x} states from {linear_path}; the network learns a correction "
               "to it, starting at zero")
         return linear
     t0 = time.process_time()
@@ -85,30 +268,19 @@ def _linear_start(args, ds, model_config, record=None):
     return linear
 
 
-def report_end(result, linear) -> None:
-    """What the user should know about how the run ended: still improving, or never better than its start."""
-    from nnfmu.training.plan import still_improving
-
-    if still_improving(result.history, result.best_epoch, result.stop_reason):
-        print(f"still improving when stopped (best epoch {result.best_epoch} of {result.history[-1]['epoch']}): "
-              "a larger budget (--epochs or --max-minutes) may help")
-    if result.best_epoch == 0:
-        start = "the linear model" if linear is not None else "the untrained network"
-        print(f"the training never improved on its start on validation: the kept weights are {start}'s")
-
-
-def planned_seeds(args, model_config, given: dict, device) -> int | None:
+def planned_seeds(request: TrainRequest, model_config, given: dict, device) -> int | None:
     """How many seeds ``nnfmu train`` trains: ``--seeds`` if given, else one per usable core (``--threads`` each;
     :data:`DEFAULT_SEEDS` .. :data:`MAX_PLANNED_SEEDS`) where the plan chooses the budget and at least two cores are
     usable, else None (one training). The choice is printed."""
     from nnfmu.models import architectures
     from nnfmu.training import resources
 
-    if args.seeds is not None or args.resume or args.increment == "auto" or {"epochs", "max_minutes"} & set(given):
-        return args.seeds
+    if (request.seeds is not None or request.resume or request.increment == "auto"
+            or {"epochs", "max_minutes"} & set(given)):
+        return request.seeds
     if architectures.architecture(model_config.arch).search_rank is None:  # the networks the search averages
         return None
-    threads, cores = args.threads or 1, resources.usable_cores()
+    threads, cores = request.threads or 1, resources.usable_cores()
     if getattr(device, "type", "cpu") != "cpu" or cores < DEFAULT_SEEDS * threads:
         return None
     seeds = min(cores // threads, MAX_PLANNED_SEEDS)

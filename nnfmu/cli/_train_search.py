@@ -8,17 +8,18 @@ Every model or training option given stays fixed in every trial.
 
 from __future__ import annotations
 
-import argparse
 import math
 
 # options of ``nnfmu train`` (argparse dests) that fix a knob or an option of every trial
 _FIXING = ("arch", "hidden", "layers", "window", "dropout", "init_window", "lr", "feedback_noise", "truncate")
 
 
-def applies(args: argparse.Namespace) -> bool:
-    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a planned architecture, in a new run."""
-    return (getattr(args, "max_minutes", None) is not None and args.epochs is None and args.patience is None
-            and args.seeds is None and not args.resume and args.increment is None and _planned(args.arch))
+def applies(request) -> bool:
+    """Whether ``nnfmu train`` searches: ``--max-minutes`` alone, on a planned architecture, in a new run
+    (``request``: a :class:`~nnfmu.cli._train_plan.TrainRequest`)."""
+    options = request.train_options
+    return ("max_minutes" in options and "epochs" not in options and "patience" not in options
+            and request.seeds is None and not request.resume and request.increment is None and _planned(request.arch))
 
 
 def _planned(arch: str | None) -> bool:
@@ -27,34 +28,37 @@ def _planned(arch: str | None) -> bool:
     return arch is None or architectures.architecture(arch).data_plan is True
 
 
-def given_options(args: argparse.Namespace, given=()) -> set:
-    """The option names the user gave (``given`` plus the model options and ``--arch`` read from ``args``)."""
-    return set(given) | {name for name in _FIXING if getattr(args, name, None) is not None}
+def given_options(request, given=()) -> set:
+    """The option names the user gave (``given`` plus the model options and ``--arch`` of ``request``) that stay
+    fixed in a search."""
+    named = {**request.model_options, **request.train_options, "arch": request.arch}
+    return set(given) | {name for name in _FIXING if named.get(name) is not None}
 
 
-def run_search(args: argparse.Namespace, ds, model_config, train_config, out, device, linear, given) -> int:
+def run_search(plan) -> int:
     """Search, print the table and the kept model's test NRMSE; returns the exit status.
 
-    ``args.started`` (optional): the :func:`time.monotonic` time the command started, so that the budget covers
-    loading the data and identifying the linear model too; without it the budget counts from this call.
+    ``plan``: a :class:`~nnfmu.cli._train_plan.TrainPlan` whose ``search`` is set. The budget counts from
+    ``plan.request.started``, the time the command started, so that it covers loading the data and identifying
+    the linear model too.
     """
     from nnfmu.cli._train_variants import print_test
     from nnfmu.errors import TrainingError
     from nnfmu.study.time_search import search_for
 
+    device, out, train_config = plan.device, plan.out, plan.train_config
     if getattr(device, "type", str(device)) != "cpu":
         print(f"note: the search trains its trials on the CPU cores, one each; --device {device} is not used")
     minutes = train_config.max_minutes
-    fixed = given_options(args, given)
     knobs = {"arch": "--arch", "hidden": "--hidden", "lr": "--lr", "feedback_noise": "--feedback-noise",
              "truncate": "--truncate"}
-    searched = [flag for name, flag in knobs.items() if name not in fixed]
+    searched = [flag for name, flag in knobs.items() if name not in plan.given]
     print(f"search: {minutes:g} min over {' '.join(searched) or 'nothing (every knob given)'} in one worker a core; "
           "trial 0 is the plain training to its own stop, successive halving stops the other trials that trail at "
           "the same epoch")
-    result = search_for(ds, minutes, model_config=model_config, train_config=train_config, linear=linear,
-                        out=out, given=fixed, seed=train_config.seed, progress=not args.quiet,
-                        since=getattr(args, "started", None))
+    result = search_for(plan.data, minutes, model_config=plan.model_config, train_config=train_config,
+                        linear=plan.linear, out=out, given=set(plan.given), seed=train_config.seed,
+                        progress=plan.progress, since=plan.request.started)
     print_table(result.rows, result.members, result.usage)
     if result.stalled:
         print(f"search: {result.stalled}")
@@ -75,7 +79,7 @@ def run_search(args: argparse.Namespace, ds, model_config, train_config, out, de
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
-    print_test(ds, result.test, result.test_window, result.model_config["init_window"])
+    print_test(plan.data, result.test, result.test_window, result.model_config["init_window"])
     return 0
 
 

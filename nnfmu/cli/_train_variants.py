@@ -1,8 +1,10 @@
-"""``nnfmu train`` beyond one training: ``--seeds K`` (the best or the ensemble) and ``--increment auto``."""
+"""``nnfmu train`` beyond one training, and the report: ``--seeds K`` (the best or the ensemble),
+``--increment auto``, and the lines that end every run (:func:`report_end`, :func:`print_test`).
+
+Each ``run_*`` takes the :class:`~nnfmu.cli._train_plan.TrainPlan` and returns the exit status.
+"""
 
 from __future__ import annotations
-
-import argparse
 
 
 def print_test(ds, test, test_window, n: int) -> None:
@@ -14,16 +16,13 @@ def print_test(ds, test, test_window, n: int) -> None:
               f"scored from sample {n})")
 
 
-def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None,
-              seeds: int | None = None) -> int:
-    """``--seeds K`` (or the plan's ``seeds``): :func:`nnfmu.training.train_seeds`, with every seed's scores and
-    their spread printed."""
+def run_seeds(plan) -> int:
+    """The plan's seeds (``--seeds K``, or the plan's choice): :func:`nnfmu.training.train_seeds`, with every seed's
+    scores and their spread printed."""
     from nnfmu.training import train_seeds
 
-    keep = args.keep or "select"
-    seeds = args.seeds if seeds is None else seeds
-
-    if args.resume:
+    request, out, seeds = plan.request, plan.out, plan.seeds
+    if request.resume:
         from nnfmu.errors import ConfigError
 
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
@@ -32,9 +31,10 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
     from nnfmu.training.ensemble import seeds_folder
 
     try:
-        result = train_seeds(ds, model_config, train_config, seeds=seeds, keep=keep, out=out, jobs=args.jobs,
-                             progress=not args.quiet, device=device, threads=args.threads, linear=linear,
-                             overwrite=args.force)
+        result = train_seeds(plan.data, plan.model_config, plan.train_config, seeds=seeds,
+                             keep=request.keep or "select", out=out, jobs=request.jobs, progress=plan.progress,
+                             device=plan.device, threads=request.threads, linear=plan.linear,
+                             overwrite=request.force)
     except (KeyboardInterrupt, Terminated):
         print(_interrupted_seeds(seeds_folder(out)))
         raise
@@ -46,7 +46,7 @@ def run_seeds(args: argparse.Namespace, ds, model_config, train_config, out, dev
     spread = result.spread()
     print(f"kept {_kept(result, seeds)}: validation free-run NRMSE {result.valid_nrmse:.4f}; checkpoint {out}")
     if result.test is not None:
-        print_test(ds, result.test, result.test_window, model_config.init_window)
+        print_test(plan.data, result.test, result.test_window, plan.model_config.init_window)
         print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")
     return 0
 
@@ -74,25 +74,26 @@ def _interrupted_seeds(folder) -> str:
     return "interrupted before any seed wrote a checkpoint: nothing was kept"
 
 
-def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out, device, run_one) -> int:
+def run_both_modes(plan, run_one) -> int:
     """``--increment auto``: train with and without increment mode and keep the lower validation NRMSE."""
     import shutil
 
     from nnfmu.errors import ConfigError
     from nnfmu.models import load_checkpoint
 
-    if args.resume:
+    out = plan.out
+    if plan.request.resume:
         raise ConfigError("--increment auto trains two networks into new files: drop --resume")
     try:  # both before the first training: an architecture without increment mode (the hybrid) fails here
-        configs = {mode: model_config.replace(increment=mode == "increment") for mode in ("residual", "increment")}
+        configs = {mode: plan.model_config.replace(increment=mode == "increment") for mode in ("residual", "increment")}
     except ConfigError as exc:
         raise ConfigError(f"--increment auto: {exc}") from exc
     scores = {}
     for mode, config in configs.items():
         part = out.with_name(f"{out.stem}.{mode}.pt")
         print(f"--- {mode} output mode -> {part}")
-        status = (run_seeds(args, ds, config, train_config, part, device) if (args.seeds or 1) > 1
-                  else run_one(args, ds, config, train_config, part, device))
+        one = plan.replace(model_config=config, request=plan.request.replace(out=part), linear=None)
+        status = run_seeds(one) if (plan.seeds or 1) > 1 else run_one(one)
         if status != 0:
             return status
         scores[mode] = load_checkpoint(part)["summary"]["best_valid_nrmse"]
@@ -101,3 +102,27 @@ def run_both_modes(args: argparse.Namespace, ds, model_config, train_config, out
     print(f"kept the {best} output mode (validation free-run NRMSE {scores['residual']:.4f} residual, "
           f"{scores['increment']:.4f} increment) in {out}")
     return 0
+
+
+def report_end(result, linear) -> None:
+    """What the user should know about how the run ended: still improving, or never better than its start (which
+    is then what was kept: the kept weights are the best on validation, the start included)."""
+    from nnfmu.training.plan import still_improving
+
+    if still_improving(result.history, result.best_epoch, result.stop_reason):
+        print(f"still improving when stopped (best epoch {result.best_epoch} of {result.history[-1]['epoch']}): "
+              "a larger budget (--epochs or --max-minutes) may help")
+    if result.best_epoch == 0:
+        print(f"the training never improved on its start on validation: the kept weights are {_start(result, linear)}")
+    elif getattr(result.model, "physics", None) is not None:  # a hybrid: what it gained over its start
+        print(f"start: the physics as given, its correction at zero, validation free-run NRMSE "
+              f"{result.history[0]['valid_nrmse']:.4f} (the kept hybrid: {result.best_valid_nrmse:.4f})")
+
+
+def _start(result, linear) -> str:
+    if linear is not None:
+        return "the linear model's"
+    if getattr(result.model, "physics", None) is not None:  # a hybrid: its correction starts at zero
+        return (f"the physics' as given, its correction at zero (validation free-run NRMSE "
+                f"{result.history[0]['valid_nrmse']:.4f})")
+    return "the untrained network's"

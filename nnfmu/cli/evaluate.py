@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 from pathlib import Path
 
 from nnfmu.atomic import write_text_atomic
@@ -93,7 +94,8 @@ def _run(args: argparse.Namespace) -> int:
     json_path = args.json or (out / "scores.json" if out else None)
     plots = args.plots or (out if out else None)
     check_writable(json_path, plots and Path(plots) / "plot.png")  # before the (long) co-simulation
-    evaluations = evaluate(args.fmus, ds, split=args.split, progress=True, protocol=protocol)
+    # a bar on a terminal only: in a log or a pipe its redraws would be lines of noise
+    evaluations = evaluate(args.fmus, ds, split=args.split, progress=sys.stderr.isatty(), protocol=protocol)
     print(f"{args.split} split of {args.data}: {ds.split(args.split).n_traj} trajectories, {protocol.describe()}; "
           "fit % = 100 (1 - NRMSE), R2 = 1 - NRMSE^2")
     print(format_table(evaluations, ds.outputs))

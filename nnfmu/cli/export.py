@@ -21,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="the .fmu file to write (default: the checkpoint's name with .fmu)")
     add_fmu_options(parser)
     parser.add_argument("--name", help="the FMU's model name and modelIdentifier (a C identifier; default: "
-                                       "the name stored in the checkpoint)")
+                                       "the .fmu file's name, so that two models of one dataset differ)")
 
 
 def add_fmu_options(parser: argparse.ArgumentParser) -> None:
@@ -92,15 +92,33 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
 
 
 def fitted_model(path: str, name: str | None = None):
-    """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model."""
+    """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model.
+
+    A fit that stored its training data's input range (``report["input_range"]``) declares it as the inputs' valid
+    range, as a trained network's or a hybrid's FMU does (:mod:`nnfmu.valid_range`)."""
     import dataclasses
 
     from nnfmu.greybox import load_fit
+    from nnfmu.valid_range import with_ranges
 
-    system, _ = load_fit(path)
+    system, report = load_fit(path)
+    ranges = (report or {}).get("input_range")
+    if ranges is not None:  # within the physics' own limits, where it declares them
+        ranges = [(lo if v.min is None else max(lo, v.min), hi if v.max is None else min(hi, v.max))
+                  for v, (lo, hi) in zip(system.inputs, ranges)]
+        system = dataclasses.replace(system, inputs=with_ranges(system.inputs, ranges))
     if name is not None:
         system = dataclasses.replace(system, name=name)
     return system.model(expose_parameters=True)
+
+
+def default_name(out: Path) -> str:
+    """The FMU's model name when ``--name`` is left out: its file's name as a C identifier (``axis-joint.fmu`` ->
+    ``axis_joint``), at most :data:`~nnfmu.limits.MAX_MODEL_NAME` characters."""
+    from nnfmu.identifiers import to_c_identifier
+    from nnfmu.limits import MAX_MODEL_NAME
+
+    return to_c_identifier(out.stem)[:MAX_MODEL_NAME]
 
 
 def export_checkpoint(args: argparse.Namespace) -> int:
@@ -119,13 +137,14 @@ def export_checkpoint(args: argparse.Namespace) -> int:
     check_fmu_options(args)
     out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
     check_writable(out)
+    name = args.name or default_name(out)
     if Path(args.checkpoint).suffix.lower() == ".json":
-        write_fmu(fitted_model(args.checkpoint, args.name), out, args)
+        write_fmu(fitted_model(args.checkpoint, name), out, args)
         return 0
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 
-    model = casadi_model(network, name=args.name)
+    model = casadi_model(network, name=name)
     write_fmu(model, out, args)
     return 0
 

@@ -138,6 +138,7 @@ def _run(args: argparse.Namespace) -> int:
     from nnfmu.errors import ConfigError
     from nnfmu.greybox import FitConfig, fit_greybox, save_fit
     from nnfmu.physics import resolve_physics
+    from nnfmu.valid_range import training_range
 
     config = FitConfig(free=_names(args.free), fixed=_names(args.fixed) or (), bounds=parse_bounds(args.bounds),
                        start={n: _number(v, "--start", n) for n, v in _pairs(args.start, "--start")},
@@ -154,5 +155,6 @@ def _run(args: argparse.Namespace) -> int:
     print(f"fit: {system.name} on {args.data} by {args.solver}, {args.starts} start(s)", flush=True)
     fit = fit_greybox(system, dataset, config, progress=not args.quiet, score_test=args.report_test)
     print("\n".join(_summary(fit.system, fit.report)))
-    print(f"wrote {save_fit(out, fit.system, {**fit.report, 'data': str(args.data)})}")
+    report = {**fit.report, "data": str(args.data), "input_range": training_range(dataset.train.u)}  # FMU range
+    print(f"wrote {save_fit(out, fit.system, report)}")
     return 0

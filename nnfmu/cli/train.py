@@ -13,20 +13,24 @@ the five networks, the hybrid (``--arch hybrid --physics NAME [--physics-params 
 model plus a neural correction, :mod:`nnfmu.hybrid`) and those of plugins (an installed package's
 ``nnfmu.architectures`` entry point, or a module named in ``NNFMU_PLUGINS``). An architecture's own options
 come from its record, and so do its strategies and training dtype.
+
+The command reads top to bottom: parse (:func:`register`, :func:`request`: the command line as a
+:class:`~nnfmu.cli._train_plan.TrainRequest`) -> plan (:func:`nnfmu.cli._train_plan.make_plan`: checks, data,
+configs and the choices left to the data, as a :class:`~nnfmu.cli._train_plan.TrainPlan`) -> run (:func:`run`:
+a search, both output modes, seeds, or one training) -> report (:mod:`nnfmu.cli._train_variants`). Every stage
+after the parse gets the plan.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from nnfmu.cli import _arch
-from nnfmu.cli._resources import add_resource_options, check_resource_options
-from nnfmu.cli._train_plan import prepare as prepare_defaults
-from nnfmu.cli._train_plan import planned_seeds, report_end
-from nnfmu.cli._train_search import applies as search_applies
+from nnfmu.cli._resources import add_resource_options
+from nnfmu.cli._train_plan import TrainPlan, TrainRequest, make_plan
 from nnfmu.cli._train_search import run_search
-from nnfmu.cli._train_variants import print_test, run_both_modes, run_seeds
-from nnfmu.limits import UNBOUNDED_EPOCHS
+from nnfmu.cli._train_variants import print_test, report_end, run_both_modes, run_seeds
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -72,6 +76,9 @@ _TRAIN_OPTIONS = (
      "several trajectories: that share of them, at random)"),
     ("--valid-blocks", "valid_blocks", int, "one training record: hold out --valid-fraction as K blocks spread over "
      "the record instead of its tail (default 1: the tail)"),
+    ("--physics-schedule", "physics_schedule", str, "a hybrid's trained physical parameters (--train-physics): "
+     "joint (with the network from the start) or staged (frozen first, then joint at a tenth of the learning "
+     "rate) (default: joint)"),
     ("--valid-horizon", "valid_horizon", str,
      "validation free runs: split (each trajectory), joined (end to end), auto (joined for contiguous pieces "
      "when the test is longer; default: auto)"),
@@ -83,7 +90,7 @@ _FLAG_OPTIONS = (
                        "consecutive pieces, as the robot benchmark's)"),
 )
 _CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
-            "valid_horizon": ("auto", "split", "joined")}
+            "valid_horizon": ("auto", "split", "joined"), "physics_schedule": ("joint", "staged")}
 
 
 
@@ -140,155 +147,59 @@ def _architecture_names() -> tuple[str, ...]:
     return architectures.names()
 
 
-def _first_searched() -> str:
-    from nnfmu.models import architectures
-
-    return architectures.search_order()[0]
-
-
-def _record(arch: str):
-    from nnfmu.models import architectures
-
-    return architectures.architecture(arch)
-
-
 def _given(args: argparse.Namespace, options) -> dict:
     return {dest: getattr(args, dest) for _, dest, _, _ in options if getattr(args, dest) is not None}
 
 
-def _train_config(args: argparse.Namespace, stored: dict | None, record):
-    from nnfmu.errors import ConfigError
-    from nnfmu.training import TrainConfig
-
-    changes = _given(args, _TRAIN_OPTIONS)
+def request(args: argparse.Namespace) -> TrainRequest:
+    """The parse stage's result: what the command line asked, options left out omitted."""
+    train_options = _given(args, _TRAIN_OPTIONS)
     if args.join is not None:
-        changes["join"] = args.join
-    if stored is None and "max_minutes" in changes and not {"epochs", "patience"} & set(changes):
-        changes.update(epochs=UNBOUNDED_EPOCHS, patience=0)  # --max-minutes alone: the budget is the only limit
-    if args.strategy is not None:
-        changes["strategy"] = args.strategy
-    if changes.get("strategy", record.strategies[0]) not in record.strategies:
-        raise ConfigError(f"a {record.name} model trains in {' or '.join(record.strategies)} mode only; drop "
-                          f"--strategy or pass --strategy {record.strategies[0]}")
-    base = TrainConfig.from_dict(stored) if stored else TrainConfig(strategy=record.strategies[0], dtype=record.dtype)
-    return base.replace(**changes)
-
-
-def _model_config(args: argparse.Namespace, ds, stored: dict | None):
-    from nnfmu.errors import ConfigError
-    from nnfmu.models import ModelConfig
-
-    given = _given(args, _MODEL_OPTIONS)
-    if args.increment == "on":
-        given["increment"] = True
-    arch = args.arch or (stored or {}).get("arch") or _first_searched()  # no --arch: searched, from the first
-    record = _record(arch)
-    given.update(_arch.given(args, record))  # the architecture's own options (its record's)
-    if stored is not None:
-        config = ModelConfig.from_dict(stored)
-        clash = {k: v for k, v in given.items() if _differs(config, k, v)}
-        if args.arch is not None and args.arch != config.arch:
-            clash["arch"] = args.arch
-        if clash:
-            raise ConfigError(f"--resume continues the stored model {config}; the options {clash} differ. "
-                              "Drop them, or train into a new --out file")
-        return config
-    if args.arch is None and not search_applies(args):
-        raise ConfigError(f"--arch is required ({', '.join(_architecture_names())}) unless --resume or "
-                          "--max-minutes alone (a search over the architectures too) is given")
-    _arch.check_required(record, given)
-    return record.get("config_class")(arch=arch, n_u=ds.n_u, n_y=ds.n_y, **given)
-
-
-def _differs(config, key: str, value) -> bool:
-    """Whether a given option differs from the stored config (an architecture's own compared after normalising)."""
-    from nnfmu.errors import NnfmuError
-
-    if key not in {o.field for o in _record(config.arch).options}:
-        return getattr(config, key) != value
-    try:
-        return getattr(config.replace(**{key: value}), key) != getattr(config, key)
-    except NnfmuError:
-        return True
+        train_options["join"] = args.join
+    return TrainRequest(data=args.data, out=Path(args.out), arch=args.arch, strategy=args.strategy,
+                        model_options=_given(args, _MODEL_OPTIONS), train_options=train_options,
+                        arch_options=_arch.given_values(args), increment=args.increment, linear_path=args.linear_path,
+                        seeds=args.seeds, keep=args.keep, jobs=args.jobs, resume=args.resume, force=args.force,
+                        quiet=args.quiet, device=args.device, threads=args.threads)
 
 
 def _run(args: argparse.Namespace) -> int:
-    import time
-    from pathlib import Path
-
-    from nnfmu.cli._checks import check_training_data
-    from nnfmu.cli._outputs import check_writable
-    from nnfmu.data import load_dataset
-    from nnfmu.errors import ConfigError
-    from nnfmu.limits import MAX_BATCH_SIZE, check_at_most
-    from nnfmu.models import load_checkpoint
-    from nnfmu.models.size import check_network_size
-    from nnfmu.training.ensemble import seeds_folder
-
-    args.started = time.monotonic()  # a --max-minutes search counts its budget from here
-    out = Path(args.out)
-    check_writable(out)  # before the data are loaded and the network built
-    device = check_resource_options(args)
-    ds = load_dataset(args.data)
-    if args.resume and not out.exists() and seeds_folder(out).is_dir():
-        raise ConfigError(f"{out} is written when its seeds in {seeds_folder(out)} are done: run the same command "
-                          "again without --resume, and the seeds continue")
-    stored = load_checkpoint(out) if args.resume else None
-    if stored is None and out.exists() and not args.force:
-        raise ConfigError(f"{out} exists; pass --resume to continue it, --force to overwrite it, or another --out")
-    model_config = _model_config(args, ds, None if stored is None else stored["model_config"])
-    record = _record(model_config.arch)
-    train_config = _train_config(args, None if stored is None else stored.get("train_config"), record)
-    check_training_data(model_config, train_config, ds)  # init window and --truncate fit the trajectories
-    check_network_size(model_config)  # before anything is allocated (nnfmu.limits)
-    check_at_most("--batch-size", train_config.batch_size, MAX_BATCH_SIZE, "MAX_BATCH_SIZE")
-    if stored is None and out.exists():
-        _check_ours(out)
-    linear, seeds = None, args.seeds
-    if stored is None:
-        given = {**_given(args, _TRAIN_OPTIONS), **({} if args.join is None else {"join": args.join})}
-        ds, model_config, train_config, linear = prepare_defaults(args, ds, model_config, train_config, given)
-        if search_applies(args):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
-            return run_search(args, ds, model_config, train_config, out, device, linear, given)
-        seeds = planned_seeds(args, model_config, given, device)
-    if args.increment == "auto":
-        return run_both_modes(args, ds, model_config, train_config, out, device, _run_one)
-    if seeds is not None and seeds > 1:  # --seeds 1 is one plain training
-        return run_seeds(args, ds, model_config, train_config, out, device, linear=linear, seeds=seeds)
-    return _run_one(args, ds, model_config, train_config, out, device, linear=linear)
+    return run(make_plan(request(args)))
 
 
-def _check_ours(out) -> None:
-    """``--force`` overwrites a checkpoint nnfmu wrote, never another file."""
-    from nnfmu.errors import CheckpointError, DataFileError
-    from nnfmu.models import load_checkpoint
+def run(plan: TrainPlan) -> int:
+    """The run stage: a search (``--max-minutes`` alone), both output modes (``--increment auto``), seeds, or one
+    training; returns the exit status."""
+    if plan.search:
+        return run_search(plan)
+    if plan.request.increment == "auto":
+        return run_both_modes(plan, run_one)
+    if plan.seeds is not None and plan.seeds > 1:  # --seeds 1 is one plain training
+        return run_seeds(plan)
+    return run_one(plan)
 
-    try:
-        load_checkpoint(out)
-    except CheckpointError as exc:
-        raise DataFileError(f"{out} is not an nnfmu checkpoint, so --force does not overwrite it; move it away or "
-                            "choose another --out") from exc
 
-
-def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, device, linear=None) -> int:
-    """One training into ``out`` (or its resumption), with the summary printed."""
+def run_one(plan: TrainPlan) -> int:
+    """One training into ``plan.out`` (or its resumption), with the summary printed."""
     import signal
 
     from nnfmu.cli._outputs import remove_if_untrained
     from nnfmu.training import train
 
+    request, out = plan.request, plan.out
     try:
-        result = train(ds, model_config, train_config, out=out, resume=args.resume, progress=not args.quiet,
-                       device=device, threads=args.threads, linear=linear)
+        result = train(plan.data, plan.model_config, plan.train_config, out=out, resume=request.resume,
+                       progress=plan.progress, device=plan.device, threads=request.threads, linear=plan.linear,
+                       say=lambda line: print(line, flush=True))
     except BaseException:
-        if not args.resume:  # a failed command leaves nothing at --out unless an epoch finished
+        if not request.resume:  # a failed command leaves nothing at --out unless an epoch finished
             remove_if_untrained(out)
         raise
     for note in result.notes:
         print(f"note: {note}")
     if result.stop_reason in ("SIGINT", "SIGTERM"):
         status = 128 + getattr(signal, result.stop_reason)
-        if not args.resume and remove_if_untrained(out):
+        if not request.resume and remove_if_untrained(out):
             print(f"interrupted before the first epoch finished: nothing was kept at {out}")
             return status
         print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, validation free-run NRMSE "
@@ -297,9 +208,9 @@ def _run_one(args: argparse.Namespace, ds, model_config, train_config, out, devi
         return status
     print(f"stopped: {result.stop_reason}; best epoch {result.best_epoch}, "
           f"validation free-run NRMSE {result.best_valid_nrmse:.4f}; checkpoint {out}")
-    report_end(result, linear)
+    report_end(result, plan.linear)
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
-    print_test(ds, result.test, result.test_window, model_config.init_window)
+    print_test(plan.data, result.test, result.test_window, plan.model_config.init_window)
     return 0

@@ -39,8 +39,8 @@ __getattr__, __dir__ = lazy_exports("nnfmu.hybrid", globals(), _LAZY)
 
 
 def _names(text: str) -> tuple[str, ...]:
-    """``"k_s, C_max"`` -> ``("k_s", "C_max")``."""
-    return tuple(n.strip() for n in text.split(",") if n.strip())
+    """``"k_s, C_max"`` -> ``("k_s", "C_max")``; ``"none"`` (or ``""``) -> ``()``."""
+    return () if text.strip().lower() == "none" else tuple(n.strip() for n in text.split(",") if n.strip())
 
 
 def counting_config(config):
@@ -78,13 +78,16 @@ register_architecture(Architecture(
         Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",
                choices="nnfmu.physics.registry:physics_names", open_choices=True,
                help="the physics model the network corrects: a registered one (%(choices)s) or FILE.py:NAME, "
-                    "a model of your own"),
+                    "a model of your own; also FILE.json, a grey-box fit from 'nnfmu fit', which the hybrid starts "
+                    "from"),
         Option(flag="--physics-params", field="physics_params", metavar="FILE.json",
                parse="nnfmu.hybrid.config:load_physics_params",
                help="JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} "
                     "(default: nominal)"),
         Option(flag="--train-physics", field="train_physics", metavar="NAME,...", parse=_names,
-               help="comma-separated physical parameters trained with the network, in log-space (default: none)"),
+               help="comma-separated physical parameters trained with the network, in log-space, or 'none' to keep "
+                    "the physics as given (default: a registered model's: none; a model file's or a fit's .json: "
+                    "its free parameters; when they train: --physics-schedule)"),
         Option(flag="--correction", field="correction", choices=("derivative", "step"),
                help="where the network corrects the physics: derivative (inside every RK4 stage, default) or "
                     "step (after it)"),

@@ -18,6 +18,7 @@ DTYPES = ("float32", "float64")
 AVERAGES = ("none", "ema", "swa")
 LR_SCHEDULES = ("constant", "cosine")
 VALID_HORIZONS = ("auto", "split", "joined")
+PHYSICS_SCHEDULES = ("joint", "staged")  # nnfmu.training.physics_schedule
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,6 +84,10 @@ class TrainConfig:
         'joined' the validation trajectories end to end as one record (as the robot's test
         record is scored); 'auto' joins them when the dataset says its pieces are consecutive
         (``source["contiguous"]``) and the test trajectories are longer than the validation ones.
+    physics_schedule : {'joint', 'staged'}
+        When a hybrid's trained physical parameters (``train_physics``) learn: 'joint' with the network from the
+        start; 'staged' frozen first, then joint at a tenth of ``lr`` (:mod:`nnfmu.training.physics_schedule`).
+        Networks have none; it does not apply to them.
     """
 
     strategy: str = "parallel"
@@ -106,10 +111,12 @@ class TrainConfig:
     lr_final: float = 0.01
     join: bool = False
     valid_horizon: str = "auto"
+    physics_schedule: str = "joint"
 
     def __post_init__(self) -> None:
         for name, valid in (("strategy", STRATEGIES), ("dtype", DTYPES), ("average", AVERAGES),
-                            ("lr_schedule", LR_SCHEDULES), ("valid_horizon", VALID_HORIZONS)):
+                            ("lr_schedule", LR_SCHEDULES), ("valid_horizon", VALID_HORIZONS),
+                            ("physics_schedule", PHYSICS_SCHEDULES)):
             if getattr(self, name) not in valid:
                 raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(valid)}")
         for name in ("average_decay", "average_start", "lr_final"):

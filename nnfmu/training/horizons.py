@@ -46,9 +46,11 @@ def validation_trajectories(ds: Dataset, cfg: TrainConfig) -> tuple[Trajectories
                      f"{valid.n_samples}-sample free run (valid_horizon={cfg.valid_horizon})")
     longest = int(valid.lengths.max())
     if test_len and longest < SHORT_VALIDATION * test_len:
+        one = valid.n_traj == 1  # one record's tail: nothing to join
+        fix = ("a larger valid_fraction (--valid-fraction), or a 'valid' split with a longer record" if one else
+               "a 'valid' split with longer records, or valid_horizon='joined' if its trajectories are consecutive")
         notes.append(f"WARNING: the validation free runs cover at most {longest} samples but the test trajectories "
-                     f"{test_len}: the epoch chosen on validation may drift over the test's horizon. Give a 'valid' "
-                     "split with longer records, or valid_horizon='joined' if its trajectories are consecutive")
+                     f"{test_len}: the epoch chosen on validation may drift over the test's horizon. Give {fix}")
     return valid, notes
 
 

@@ -29,6 +29,7 @@ from nnfmu.training.compiled_rollout import training_rollout
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
 from nnfmu.training.horizons import lr_factor, with_context
+from nnfmu.training.physics_schedule import PhysicsSchedule
 from nnfmu.training.resources import adamw, cpu_state
 
 
@@ -90,7 +91,8 @@ class Session:
 
     def __init__(self, model: StepModel, cfg: TrainConfig, train_seqs: list, valid, out: Path | None):
         self.model, self.cfg, self.train_seqs, self.valid, self.out = model, cfg, train_seqs, valid, out
-        self.optimizer = adamw(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        self.schedule = PhysicsSchedule(model, cfg.physics_schedule)
+        self.optimizer = adamw(self.schedule.groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
         if cfg.feedback_noise and not model.takes_feedback_noise:
             raise ConfigError(f"a {type(model).__name__} feeds back no output that feedback_noise could disturb; "
                               "train it with feedback_noise=0")
@@ -134,8 +136,9 @@ class Session:
                 norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)
                 if not (torch.isfinite(loss) and torch.isfinite(norm)):
                     self._diverged(float(loss.detach()), b)
-                for group in self.optimizer.param_groups:
-                    group["lr"] = cfg.lr * lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                factor = lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                for group in self.optimizer.param_groups:  # lr_scale: nnfmu.training.physics_schedule
+                    group["lr"] = cfg.lr * group.get("lr_scale", 1.0) * factor
                 self.optimizer.step()
                 self.average.after_step()
                 total += float(loss.detach()) * len(un)
@@ -201,7 +204,7 @@ class Session:
         return {"epoch": self.epoch, "state_dict": state_snapshot(self.model),
                 "optimizer": cpu_state(self.optimizer.state_dict()), "torch_rng": torch.get_rng_state(),
                 "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed,
-                "average": cpu_state(self.average.state_dict())}
+                "average": cpu_state(self.average.state_dict()), **self.schedule.state()}
 
     def restore(self, ckpt: dict) -> None:
         """Continue from a checkpoint written by :meth:`save` (its ``resume`` section)."""
@@ -217,6 +220,7 @@ class Session:
         self.history = list(ckpt["history"])
         if "average" in r:
             self.average.load_state_dict(r["average"])
+        self.schedule.restore(r)
 
     def save(self, summary: dict | None = None) -> None:
         """Write the checkpoint: the best weights, the history and the last finished epoch's resume state."""

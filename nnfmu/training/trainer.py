@@ -27,7 +27,7 @@ from typing import Callable, Mapping
 import numpy as np
 import torch
 
-from nnfmu.data import Dataset
+from nnfmu.data import Dataset, Trajectories
 from nnfmu.errors import CheckpointError, ConfigError
 from nnfmu.metrics import NrmseResult
 from nnfmu.models import architectures
@@ -38,15 +38,18 @@ from nnfmu.models.registry import build_model
 from nnfmu.progress import advance, training_bar
 from nnfmu.training.batches import normalised_sequences
 from nnfmu.training.config import TrainConfig
-from nnfmu.training.evaluate import free_run_nrmse
+from nnfmu.training.evaluate import free_run, free_run_nrmse
 from nnfmu.training.horizons import join_sequences, validation_trajectories
 from nnfmu.training.increments import prepare_increment
 from nnfmu.training.linear_start import start_linear_path
+from nnfmu.training.physics_schedule import STAGED_LR
 from nnfmu.training.resources import check_threads, resolve_device
 from nnfmu.training.session import Session, StopRequests, StopTraining, flush_denormals
 from nnfmu.valid_range import training_range
 
 Callback = Callable[[int, dict], None]
+#: Preparing a model (building it, compiling its C) for this many seconds or more is reported through ``say``.
+SAY_PREPARED_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -172,6 +175,7 @@ def train(
     device: str | torch.device | None = "auto",
     threads: int | None = None,
     linear=None,
+    say: Callable[[str], None] | None = None,
 ) -> TrainResult:
     """Train a step network in parallel or series-parallel mode; early stopping on validation free-run NRMSE.
 
@@ -203,6 +207,10 @@ def train(
     linear : nnfmu.linear.LinearModel, optional
         With ``model_config.linear_order = n_z > 0``: the linear model of ``n_z`` states the network starts
         from (:mod:`nnfmu.models.linear_path`); None identifies one of that order on the training split.
+    say : callable, optional
+        ``say(line)`` for what the user should know before the epochs start: how long preparing the model took
+        (its C compiled, or taken from the cache), when that took :data:`SAY_PREPARED_S` or more. The
+        ``max_minutes`` budget starts after it.
 
     Raises
     ------
@@ -225,6 +233,7 @@ def train(
     notes += valid_notes
     dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
+        started = time.monotonic()
         if ckpt:
             model = _resumed_model(ckpt, model_config, out, dataset)
         else:
@@ -236,6 +245,7 @@ def train(
         session = Session(model, cfg, join_sequences(seqs) if cfg.join else seqs, valid, out)
         if ckpt:
             session.restore(ckpt)
+        _prepared(session, time.monotonic() - started, say)
         try:
             stop_reason = _run(session, progress, callback)
         except BaseException:
@@ -286,6 +296,20 @@ def _as_train_config(train_config) -> TrainConfig:
     return train_config
 
 
+def _prepared(session: Session, seconds: float, say: Callable[[str], None] | None) -> None:
+    """Run the model once on a few validation samples, so that whatever its free runs compile (a hybrid's whole
+    step, :mod:`nnfmu.hybrid.fused`; a recurrent network's C rollout) is compiled before the budget starts, and
+    say how long building and compiling took. No weight or random state changes (no gradient, eval mode)."""
+    t0 = time.monotonic()
+    valid, context = session.valid, session.context + 1
+    n = min(int(valid.lengths[0]), context + 2)
+    free_run(session.model, Trajectories((valid.u[0][:n],), (valid.y[0][:n],)), context=context)
+    seconds += time.monotonic() - t0
+    if say is not None and seconds >= SAY_PREPARED_S:
+        say(f"prepared the model in {seconds:.1f} s (building it and compiling its C, which is cached for later "
+            "runs); the training budget starts now")
+
+
 def _run(session: Session, progress: bool, callback: Callback | None) -> str:
     """The epoch loop; returns why it stopped."""
     cfg = session.cfg
@@ -309,6 +333,7 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
                 session.save()
             _show(bar, entry)
             advance(bar, session.epoch)
+            _next_stage(session, bar, deadline)
             if callback is not None:
                 try:
                     callback(session.epoch, dict(entry))
@@ -318,6 +343,17 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
             if early:
                 return "time-budget"
         return "early-stopping" if session.patience_exhausted() else "epochs"
+
+
+def _next_stage(session: Session, bar, deadline: float | None) -> None:
+    """``physics_schedule='staged'``: the physical parameters join the training when their frozen stage ends."""
+    cfg = session.cfg
+    budget = None if deadline is None else (deadline - 60.0 * cfg.max_minutes, deadline)
+    if session.schedule.due(session.epoch, cfg.epochs, budget, session.patience_exhausted()):
+        session.schedule.start_joint()
+        session.bad_epochs = 0  # the joint stage gets its own patience
+        bar.write(f"epoch {session.epoch}: the physical parameters train from here on (staged schedule), at "
+                  f"{STAGED_LR:g} times the learning rate")
 
 
 def _save_quietly(session: Session) -> None:
