@@ -25,6 +25,7 @@ pytestmark = pytest.mark.usefixtures("one_thread")
 @pytest.fixture(scope="module")
 def toy():
     """The toy's record, loaded as a user loads it (NNFMU_PLUGINS); the registry is restored afterwards."""
+    architectures.records()  # every installed architecture registered, so that restoring the records keeps them
     records, env, path = dict(architectures._RECORDS), os.environ.get("NNFMU_PLUGINS"), list(sys.path)
     os.environ["NNFMU_PLUGINS"] = "toy_arch"
     sys.path.insert(0, str(PLUGINS))
