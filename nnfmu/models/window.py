@@ -1,7 +1,7 @@
 """Window models (MLP, TCN): the network sees the last ``L`` samples of ``[y, u]``.
 
 The MLP's flat state, in normalised units (what the FMU carries), is that window
-(the TCN keeps delay lines instead: :mod:`nnfmu.models.tcn_state`)::
+(the TCN keeps delay lines instead: :mod:`nnfmu.networks.tcn.state`)::
 
     x = [ y_{k-L+1} | ... | y_k   (L * n_y) | u_{k-L+1} | ... | u_{k-1}   ((L-1) * n_u) ]
 
@@ -13,7 +13,7 @@ measured samples before t0 fill it instead (:mod:`nnfmu.models.encoder`).
 Teacher forcing pads the measured sequence on the left the same way and
 evaluates all windows in one fused call. In increment mode the MLP sees the
 window's outputs relative to its newest one, ``y_j - y_k`` (the TCN: each
-first-layer column relative to its own newest tap, :mod:`nnfmu.models.tcn_state`).
+first-layer column relative to its own newest tap, :mod:`nnfmu.networks.tcn.state`).
 """
 
 from __future__ import annotations
