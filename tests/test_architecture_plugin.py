@@ -197,3 +197,14 @@ def test_the_design_pages_example_architecture_trains_exports_and_is_offered(dat
         sys.modules.pop("design_example", None)
         architectures._RECORDS.clear()
         architectures._RECORDS.update(records)
+
+
+def test_the_installed_entry_points_are_those_of_pyproject():
+    """The built-in architectures are found through the entry points, so the installed metadata must list each one
+    that pyproject.toml declares (after a change there: pip install -e . again)."""
+    import tomllib
+    from importlib.metadata import entry_points
+
+    declared = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["entry-points"]
+    installed = {ep.name: ep.value for ep in entry_points(group=architectures.ENTRY_POINT_GROUP)}
+    assert installed == dict(declared[architectures.ENTRY_POINT_GROUP]), "reinstall nnfmu: pip install -e ."

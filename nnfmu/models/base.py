@@ -59,13 +59,14 @@ def check_meta(meta: Mapping, config: ModelConfig) -> dict:
 
 
 class StepModel(nn.Module):
-    """Base class of the five networks; see the module docstring for the step contract.
+    """Public base of every architecture's model; see the module docstring for the step contract.
 
-    Subclasses implement the normalised core: :meth:`init_norm`,
-    :meth:`step_norm`, :meth:`inject_y` (used by the generic teacher-forced
-    loop) and may override :meth:`teacher_forced_norm` and
+    Subclasses implement the normalised core, public hooks all (docs/design.md, "Adding an architecture"):
+    :attr:`n_x`, :meth:`init_norm`, :meth:`step_norm`, :meth:`inject_y` (used by the generic teacher-forced
+    loop), and may override :meth:`init_window_norm`, :meth:`teacher_forced_norm` and
     :meth:`free_run_norm` with faster equivalent calls. They call
-    :meth:`check_sizes` at the end of ``__init__``.
+    :meth:`check_sizes` at the end of ``__init__``; :meth:`apply_skip` and :meth:`y_input` give the skip
+    connection and increment mode.
 
     Attributes
     ----------
@@ -103,13 +104,15 @@ class StepModel(nn.Module):
         raise NotImplementedError
 
     def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        """Initial state ``x0`` (B, n_x) from ``yn0`` (B, n_y) and ``un0`` (B, n_u), normalised: the plant at rest."""
         raise NotImplementedError
 
     def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """One step, normalised: ``x`` (B, n_x), ``un`` (B, n_u) -> ``(x_next (B, n_x), yn_next (B, n_y))``."""
         raise NotImplementedError
 
     def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
-        """State ``x`` with its newest output ``y_k`` replaced by ``yn`` (teacher forcing)."""
+        """State ``x`` (B, n_x) with its newest output ``y_k`` replaced by ``yn`` (B, n_y) (teacher forcing)."""
         raise NotImplementedError
 
     def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
@@ -120,7 +123,8 @@ class StepModel(nn.Module):
         return self.init_norm(yn_win[:, -1], un_win[:, -1])
 
     def apply_skip(self, yn: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
-        """Apply the optional skip connection: ``y_{k+1} = y_k + scale * N`` or ``N``.
+        """Apply the optional skip connection to ``yn`` and the network's output ``n`` (both (B, n_y), normalised):
+        ``y_{k+1} = y_k + scale * N`` or ``N``.
 
         ``scale`` is ``skip_scale``, or in increment mode the per-output ``increment_scale``.
         """
