@@ -95,3 +95,20 @@ def test_the_scan_finds_a_comparison_and_a_list_added_anywhere():
         assert found and all(s.startswith(f"nnfmu/{module}:{line}: ") for s in found), found
     # in its own folder the TCN may name itself: only the GRU is stray there
     assert stray_names(folders, {path: text + added}) == [f"nnfmu/networks/tcn/model.py:{line}: 'gru'"]
+
+
+def test_each_public_name_of_a_package_is_declared_once():
+    """models, networks, training and ss write each public name once, as an import (nnfmu._lazy.declared_exports):
+    no lazy table or ``__all__`` list beside it, and every name resolves, lazily or not."""
+    import importlib
+
+    for package in ("nnfmu.models", "nnfmu.networks", "nnfmu.training", "nnfmu.ss"):
+        module = importlib.import_module(package)
+        source = Path(module.__file__).read_text(encoding="utf-8")
+        assert "_LAZY" not in source and "__all__ = [" not in source, package
+        imported = [a.asname or a.name for node in ast.walk(ast.parse(source)) if isinstance(node, ast.ImportFrom)
+                    and (node.module or "").startswith("nnfmu.") and not node.module.startswith("nnfmu._")
+                    for a in node.names]
+        assert sorted(n for n in imported if not n.startswith("_")) == module.__all__, package
+        assert all(getattr(module, name) is not None for name in module.__all__), package
+    assert {"ModelConfig", "StepModel", "Architecture", "build_model"} <= set(importlib.import_module("nnfmu.models").__all__)

@@ -229,13 +229,17 @@ class ModelConfig:
         return cls(**d)
 
     def replace(self, **changes) -> "ModelConfig":
-        """A copy with ``changes``; sizes derived from the changed fields are recomputed."""
+        """A copy with ``changes``; sizes derived from the changed fields are recomputed.
+
+        A new ``arch`` of another config class keeps the shared fields (those of ModelConfig) only.
+        """
         check_options(changes, {f.name for f in dataclasses.fields(self)}, "ModelConfig")
         if "arch" in changes:
             changes.setdefault("layers", None)
             changes.setdefault("window", None)
-            shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(ModelConfig)}
-            return ModelConfig(**{**shared, **changes})
+            if _config_class(changes["arch"]) is not type(self):
+                shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(ModelConfig)}
+                return ModelConfig(**{**shared, **changes})
         if {"layers", "kernel_size"} & set(changes):
             changes.setdefault("window", self.kept_window())
         return dataclasses.replace(self, **changes)
