@@ -91,7 +91,8 @@ class Budget:
         White Gaussian measurement noise added to the outputs of generated data, as a fraction of
         each output's training standard deviation, in every split (the paper's data were measured).
     archs, strategies : tuple of str
-        The networks trained: every architecture with every strategy.
+        The networks trained: every architecture (default: those ``hyper`` covers, in its order; each a registered
+        one) with every strategy.
     epochs, patience : int
         Maximum epochs and early-stopping patience of every training: the budget proper, so that
         a seed gives the same table on any machine.

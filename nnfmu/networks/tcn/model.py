@@ -84,7 +84,7 @@ class TCNStepModel(WindowStepModel):
     def _predict_windows(self, window: torch.Tensor) -> torch.Tensor:
         return self.head(self._features(window)[:, -1])
 
-    # ---- the incremental step (state layout: nnfmu.models.tcn_state) -------------------------
+    # ---- the incremental step (state layout: nnfmu.networks.tcn.state) -------------------------
     @property
     def n_x(self) -> int:
         return tcn_state.state_size(self.config)
