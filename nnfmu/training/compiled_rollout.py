@@ -58,11 +58,11 @@ def compiled_rollout(model: StepModel):
     if not _applies(model):
         return None
     net = model.net if type(model) is LinearPathStepModel else model
-    window = rollout_cells.compiled_cell(net).library == rollout_cells.WINDOW
-    library = library_or_none(model.u_mean.dtype, rollout_cells.compiled_cell(net).library)
+    cell = rollout_cells.compiled_cell(net)
+    library = library_or_none(model.u_mean.dtype, cell.library)
     if library is None:
         return None
-    if window:
+    if cell.library == rollout_cells.WINDOW:
         return functools.partial(compiled_window.apply, model, library)
     return functools.partial(_apply, model, library)
 
