@@ -4,7 +4,7 @@ A training batch of ``--batch`` x ``--steps`` samples through a GRU of ``--hidde
 ``--order`` states (``ModelConfig.linear_order``; a random stable A, nonzero G and alpha), float32 as the trainer
 runs it, one thread. Two paths of the same model, same numbers:
 
-- ``torch``: the generic loop over ``LinearPathStepModel._step_norm`` (``model.rollout_normalised``);
+- ``torch``: the generic loop over ``LinearPathStepModel.step_norm`` (``model.rollout_normalised``);
 - ``compiled``: :func:`nnfmu.training.compiled_rollout.compiled_rollout` (rollout.c with the path).
 
 Process CPU time, interleaved rounds of back-to-back calls, median printed with the ratio. Pin it to one core on

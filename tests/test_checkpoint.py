@@ -10,7 +10,8 @@ import torch
 
 import nnfmu
 from nnfmu.errors import CheckpointError, DataFileError
-from nnfmu.models import ARCHS, ModelConfig, build_model, load_checkpoint, load_model, save_checkpoint
+from nnfmu.models import ModelConfig, build_model, load_checkpoint, load_model, save_checkpoint
+from builtin_networks import ARCHS
 
 META = {"name": "valve_test", "Ts": 4e-5, "inputs": [{"name": "u1", "unit": "V"}, {"name": "u2", "unit": "V"}],
         "outputs": [{"name": "s", "unit": "m"}, {"name": "p", "unit": "Pa"}], "source": {"seed": 3}}

@@ -1,5 +1,5 @@
 """The compiled free run (nnfmu/training/rollout.c) of a recurrent network on a linear path computes what torch's
-generic loop over ``LinearPathStepModel._step_norm`` computes: outputs and the gradients of every parameter and
+generic loop over ``LinearPathStepModel.step_norm`` computes: outputs and the gradients of every parameter and
 of ``yn0`` (through the network, the path and ``z0``), in float64, for every cell and depth; and a training on the
 path with the compiled free run (recurrent, TCN and MLP: window_rollout.c) equals one in torch."""
 

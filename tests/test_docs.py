@@ -56,7 +56,7 @@ def test_readme_links_resolve():
 
 
 PUBLIC_MODULES = ("nnfmu", "nnfmu.data", "nnfmu.models", "nnfmu.training", "nnfmu.export", "nnfmu.linear",
-                  "nnfmu.physics", "nnfmu.greybox", "nnfmu.hybrid", "nnfmu.node", "nnfmu.study")
+                  "nnfmu.physics", "nnfmu.greybox", "nnfmu.hybrid", "nnfmu.node", "nnfmu.study", "nnfmu.networks")
 
 
 def test_every_exported_name_is_on_the_api_page():

@@ -42,11 +42,11 @@ def test_a_mixed_ensemble_is_its_members_mean_fed_back_in_torch_casadi_and_the_f
     with torch.no_grad():
         un = (torch.tensor(u) - ensemble.u_mean) / ensemble.u_std
         yn0 = (torch.tensor(y[0]) - ensemble.y_mean) / ensemble.y_std
-        states = [m._init_norm(yn0[None], un[:1]) for m in members]
+        states = [m.init_norm(yn0[None], un[:1]) for m in members]
         for k in range(len(u) - 1):
-            steps = [m._step_norm(x, un[k:k + 1]) for m, x in zip(members, states)]
+            steps = [m.step_norm(x, un[k:k + 1]) for m, x in zip(members, states)]
             yn = torch.stack([s[1] for s in steps]).mean(0)
-            states = [m._inject_y(s[0], yn) for m, s in zip(members, steps)]
+            states = [m.inject_y(s[0], yn) for m, s in zip(members, steps)]
             assert rel(yn[0] * ensemble.y_std + ensemble.y_mean, got[k + 1]) < 1e-12
 
     save_checkpoint(tmp_path / "e.pt", ensemble)

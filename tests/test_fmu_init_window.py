@@ -8,9 +8,10 @@ import pytest
 from nnfmu.cli import main
 from nnfmu.cosim import FmuSimulator, inspect_fmu
 from nnfmu.export import build_fmu, casadi_model
-from nnfmu.models import ARCHS, EnsembleStepModel, load_model
+from nnfmu.models import EnsembleStepModel, load_model
 from nnfmu.window_names import past_element, past_name
 from tests.test_model_options import N, past, perturbed
+from builtin_networks import ARCHS
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 

@@ -30,8 +30,9 @@ from nnfmu.errors import ConfigError
 from nnfmu.export import build_fmu, casadi_model
 from nnfmu.cbuild import run_compiler
 from nnfmu.export.fmu import BuildOptions, fmi_header_dir, platform_folder
-from nnfmu.models import ARCHS, ModelConfig, build_model
+from nnfmu.models import ModelConfig, build_model
 from nnfmu.system import CasadiModel, SystemSpec
+from builtin_networks import ARCHS
 
 N_STEPS = 3500
 NORM = {"u_mean": [100.0, 120.0], "u_std": [70.0, 60.0], "y_mean": [5e-4, 4e5], "y_std": [3e-4, 1.5e5]}
@@ -176,7 +177,7 @@ def test_incremental_tcn_predicts_what_the_windowed_tcn_predicts(options):
     y0 = torch.tensor([[6e-4, 3e5]], dtype=torch.float64)
     with torch.no_grad():
         incremental = model(u, y0)
-        windowed = WindowStepModel._free_run_norm(model, model.normalise_u(u), model.normalise_y(y0))
+        windowed = WindowStepModel.free_run_norm(model, model.normalise_u(u), model.normalise_y(y0))
     assert rel_error(incremental[0, 1:].numpy(), model.denormalise_y(windowed[0, 1:]).numpy()) < 1e-12
 
 

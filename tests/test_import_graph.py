@@ -29,6 +29,7 @@ LAYERS = (
     ("models", {"models"}),
     ("training", {"training"}),
     ("export", {"export"}),
+    ("networks", {"networks"}),
     ("hybrid", {"hybrid"}),
     ("node", {"node"}),
     ("ss", {"ss"}),

@@ -16,7 +16,7 @@ from nnfmu.training.linear_start import start_linear_path
 from tests.test_linear import dataset, true_system
 
 pytestmark = pytest.mark.usefixtures("one_thread")
-ARCHS = ("mlp", "rnn", "lstm", "gru", "tcn")
+from builtin_networks import ARCHS
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,9 @@ import torch
 import nnfmu.models
 from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.export import casadi_model
-from nnfmu.models import ARCHS, EnsembleStepModel, ModelConfig, StepModel
+from nnfmu.models import EnsembleStepModel, ModelConfig, StepModel
 from tests.test_models import N_U, N_Y, make_model, random_io
+from builtin_networks import ARCHS
 
 N = 6  # init window
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -96,9 +97,9 @@ def test_fused_teacher_forcing_with_window_and_increment_equals_the_step_loop(ar
     un, yn = random_io(2, 30)
     y_past, u_past = (torch.as_tensor(np.stack([a, a + 1])) for a in past())
     with torch.no_grad():
-        x0 = model._init_window_norm(*model._window(yn[:, 0], un[:, 0], (y_past, u_past)))
+        x0 = model.init_window_norm(*model._window(yn[:, 0], un[:, 0], (y_past, u_past)))
         fused = model.rollout_normalised(un, yn[:, 0], yn, (y_past, u_past))[:, 1:]
-        generic = StepModel._teacher_forced_norm(model, un, yn, x0)
+        generic = StepModel.teacher_forced_norm(model, un, yn, x0)
     torch.testing.assert_close(fused, generic, rtol=1e-12, atol=1e-12)
 
 

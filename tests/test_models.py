@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from nnfmu.errors import ConfigError, DataError, ShapeError, UnknownOptionError
-from nnfmu.models import ARCHS, ModelConfig, StepModel, build_model
+from nnfmu.models import ModelConfig, StepModel, build_model
+from builtin_networks import ARCHS
 
 N_U, N_Y = 2, 3
 
@@ -62,7 +63,7 @@ def test_fused_teacher_forcing_equals_the_step_loop_fed_with_measurements(arch, 
     with torch.no_grad():
         fused = model(u, y[:, 0], y)
         un, yn = model.normalise_u(u), model.normalise_y(y)
-        generic = StepModel._teacher_forced_norm(model, un, yn)  # loop over _step_norm with y injected
+        generic = StepModel.teacher_forced_norm(model, un, yn)  # loop over step_norm with y injected
     assert fused.shape == y.shape
     torch.testing.assert_close(fused[:, 1:], model.denormalise_y(generic), rtol=1e-12, atol=1e-12)
 
@@ -197,7 +198,7 @@ def test_sub_network_mismatch_is_caught_by_the_dry_run():
         def __init__(self, config):
             super().__init__(config)
             self.readout = torch.nn.Linear(config.hidden + 1, config.n_y)  # does not fit the cell
-            self._check_sizes()
+            self.check_sizes()
 
     with pytest.raises(ShapeError, match="inconsistent layer sizes"):
         BrokenGRU(ModelConfig(arch="gru", n_u=N_U, n_y=N_Y))
@@ -206,7 +207,7 @@ def test_sub_network_mismatch_is_caught_by_the_dry_run():
 def test_config_options_are_checked():
     with pytest.raises(ConfigError, match="unknown architecture 'cnn'; choose one of mlp, rnn, lstm, gru, tcn"):
         ModelConfig(arch="cnn", n_u=1, n_y=1)
-    with pytest.raises(UnknownOptionError, match="unknown ModelConfig option.*'hiden'.*valid options are"):
+    with pytest.raises(UnknownOptionError, match="unknown RecurrentConfig option.*'hiden'.*valid options are"):
         ModelConfig.from_dict({"arch": "gru", "n_u": 1, "n_y": 1, "hiden": 8})
     with pytest.raises(ConfigError, match="activation 'elu' is not available for arch 'rnn'"):
         ModelConfig(arch="rnn", n_u=1, n_y=1, activation="elu")

@@ -12,10 +12,11 @@ import torch
 
 from nnfmu.cli import main
 from nnfmu.errors import ConfigError, DataError
-from nnfmu.models import ARCHS, load_checkpoint
+from nnfmu.models import load_checkpoint
 from nnfmu.study import BUDGETS, Hyper, get_budget, reproduce
 from nnfmu.study.tune import check_grid
 from nnfmu.training import STRATEGIES
+from builtin_networks import ARCHS
 
 N_CELLS = 1 + 2 * 10 + 3 + 12 + 1  # data, train+export x 10, linear (2) + physics, 12 scores, report
 

@@ -87,5 +87,5 @@ def test_ss_config_rules():
     assert config.n_states == 4 and config.replace(linear_order=7).n_states == 7  # the path's order once it has one
     model = build_model(config)
     with torch.no_grad():  # without a path: SUBNET's own form, random f and h, a state that moves
-        x = model._init_norm(torch.zeros(1, 2), torch.ones(1, 1))
-        assert float(model._step_norm(x, torch.ones(1, 1))[0].abs().max()) > 0
+        x = model.init_norm(torch.zeros(1, 2), torch.ones(1, 1))
+        assert float(model.step_norm(x, torch.ones(1, 1))[0].abs().max()) > 0

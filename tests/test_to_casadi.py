@@ -9,9 +9,11 @@ from torch import nn
 
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_model, to_casadi
-from nnfmu.models import ARCHS, ModelConfig, RecurrentStepModel, build_model, load_model, save_checkpoint
+from nnfmu.models import ModelConfig, build_model, load_model, save_checkpoint
+from nnfmu.networks import RecurrentStepModel
 from nnfmu.models.base import torch_threads
 from nnfmu.training import TrainConfig, train
+from builtin_networks import ARCHS
 
 N_STEPS = 3500
 NORM = {"u_mean": [100.0, 120.0], "u_std": [70.0, 60.0], "y_mean": [5e-4, 4e5], "y_std": [3e-4, 1.5e5]}
@@ -154,7 +156,7 @@ def test_an_unsupported_layer_names_itself_and_the_supported_ones():
 
 def test_a_changed_computation_is_caught_by_the_verification():
     class DampedGRU(RecurrentStepModel):
-        def _skip(self, yn, n):
+        def apply_skip(self, yn, n):
             return 0.5 * yn + n  # not the documented skip connection
 
     torch.manual_seed(0)

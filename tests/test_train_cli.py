@@ -15,8 +15,9 @@ import nnfmu
 from nnfmu.cli import main
 from nnfmu.cli import train as cli
 from nnfmu.data import Trajectories, save_dataset
-from nnfmu.models import ARCHS, ModelConfig, load_checkpoint
+from nnfmu.models import ModelConfig, load_checkpoint
 from nnfmu.training import STRATEGIES, TrainConfig
+from builtin_networks import ARCHS
 
 QUICK = ["--epochs", "1", "--hidden", "8", "--truncate", "30", "--batch-size", "16", "--quiet"]
 

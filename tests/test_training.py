@@ -11,9 +11,10 @@ import torch
 
 from nnfmu.data import Dataset, Trajectories, from_arrays
 from nnfmu.errors import ConfigError, DataError, TrainingError, UnknownOptionError
-from nnfmu.models import ARCHS, ModelConfig, build_model, load_checkpoint, load_model
+from nnfmu.models import ModelConfig, build_model, load_checkpoint, load_model
 from nnfmu.training import STRATEGIES, StopTraining, TrainConfig, train
 from nnfmu.training.batches import Batch, epoch_batches, masked_mse
+from builtin_networks import ARCHS
 
 TINY = dict(hidden=8)
 FAST = dict(epochs=3, batch_size=8, truncate=40, lr=1e-2, patience=0)

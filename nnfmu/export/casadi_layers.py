@@ -120,3 +120,16 @@ def conv_column_expr(conv: nn.Conv1d, taps: list):
     weight = conv.weight.detach().permute(0, 2, 1).reshape(conv.out_channels, -1)  # (H, k*C): tap-major columns
     out = ca.mtimes(dm(weight), ca.vertcat(*taps))
     return out + dm(conv.bias) if conv.bias is not None else out
+
+
+def skip_expr(model, yn, n):
+    """:meth:`nnfmu.models.StepModel.apply_skip` in CasADi: ``n``, or ``yn + scale * n`` (``skip_scale``, or in
+    increment mode the per-output ``increment_scale``)."""
+    if not model.config.skip:
+        return n
+    return yn + (dm(model.increment_scale) * n if model.config.increment else model.config.skip_scale * n)
+
+
+def last_columns(columns: list, n: int, pad) -> list:
+    """The last ``n`` of ``columns``, padded in front with ``pad`` (as :func:`nnfmu.models.encoder.last_samples`)."""
+    return [pad] * max(0, n - len(columns)) + columns[max(0, len(columns) - n):]

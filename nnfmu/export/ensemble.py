@@ -3,7 +3,7 @@
 The members' own Functions (:func:`nnfmu.export.to_casadi`) are inlined on their slices of the
 state; the ensemble's output is the mean of theirs, and it is written back into every member's
 state as its newest output, in the member's normalised units, at the slot the member's
-``_inject_y`` writes (found by :func:`nnfmu.models.linear_path.y_slot`).
+``inject_y`` writes (found by :func:`nnfmu.models.linear_path.y_slot`).
 """
 
 from __future__ import annotations

@@ -7,9 +7,8 @@
 
 The functions work in physical units (normalisation is inside), include the
 skip connection, treat dropout as the identity, and carry exactly the state
-vector documented in :mod:`nnfmu.models.recurrent`, :mod:`nnfmu.models.window`
-(the MLP) and :mod:`nnfmu.models.tcn_state` (the TCN's delay lines: a step
-computes one new column per layer), so ``CasadiModel.simulate`` equals
+vector each architecture documents (its record's ``casadi_step`` and ``casadi_init``, e.g.
+:mod:`nnfmu.networks.tcn.export` on the TCN's delay lines), so ``CasadiModel.simulate`` equals
 ``model.simulate`` (to about 1e-15 per step in float64). The graphs are MX
 with the weights as dense constants (see :mod:`nnfmu.export.casadi_layers`).
 Every export is checked numerically against the torch step; a model whose
@@ -27,9 +26,9 @@ import torch
 from nnfmu.errors import ExportError
 from nnfmu.export import casadi_layers as nets
 from nnfmu.export.ensemble import ensemble_to_casadi, inlined, with_y
-from nnfmu.export.init_window import init_function, relative_taps
+from nnfmu.export.init_window import init_function
 from nnfmu.identifiers import to_c_identifier
-from nnfmu.models import EnsembleStepModel, StepModel, architectures, tcn_state
+from nnfmu.models import EnsembleStepModel, StepModel, architectures
 from nnfmu.models.linear_path import LinearPathStepModel, y_slot
 from nnfmu.system import CasadiModel, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables, with_starts
@@ -42,59 +41,6 @@ def _check_modules(model: StepModel) -> None:
     for name, module in model.named_modules():
         if name and not isinstance(module, nets.SUPPORTED):
             raise nets.unsupported(name, module)
-
-
-def recurrent_step(model, x, un):
-    """The RNN/LSTM/GRU step (:class:`~nnfmu.models.RecurrentStepModel`; layout: :mod:`nnfmu.models.recurrent`)."""
-    c = model.config
-    yn = x[0:c.n_y]
-    n_blocks = c.layers * (2 if model.is_lstm else 1)
-    hidden = [x[c.n_y + i * c.hidden:c.n_y + (i + 1) * c.hidden] for i in range(n_blocks)]
-    hs, cs = (hidden[:c.layers], hidden[c.layers:]) if model.is_lstm else (hidden, [None] * c.layers)
-    inp, new_h, new_c = ca.vertcat(ca.DM.zeros(c.n_y, 1) if c.increment else yn, un), [], []
-    for i, layer in enumerate(model.rnn_layers):
-        nets.check_recurrent_layer(layer, f"rnn_layers.{i}")
-        h, cell = nets.recurrent_layer_expr(layer, inp, hs[i], cs[i])
-        new_h.append(h)
-        if cell is not None:
-            new_c.append(cell)
-        inp = h
-    yn_next = _skip(model, yn, nets.linear_expr(model.readout, inp))
-    return ca.vertcat(yn_next, *new_h, *new_c), yn_next
-
-
-def tcn_step(model, x, un):
-    """The incremental TCN step on its delay lines (layout: :mod:`nnfmu.models.tcn_state`)."""
-    c = model.config
-    yn, h, offset, new_lines = x[0:c.n_y], ca.vertcat(x[0:c.n_y], un), c.n_y, []
-    for i, (n, width) in enumerate(tcn_state.line_shapes(c)):
-        cols = [x[offset + j * width:offset + (j + 1) * width] for j in range(n)] + [h]
-        offset += n * width
-        taps = relative_taps(cols, c.n_y) if i == 0 and c.increment else cols[::2 ** i]
-        out = nets.activation_expr(model.activation, nets.conv_column_expr(model.convs[i], taps), "activation")
-        new_lines += cols[1:]
-        h = out if i == 0 else h + out
-    yn_next = _skip(model, yn, nets.linear_expr(model.head, h))
-    return ca.vertcat(yn_next, *new_lines), yn_next
-
-
-def window_step(model, x, un):
-    """The MLP step on its window (:class:`~nnfmu.models.MLPStepModel`; layout: :mod:`nnfmu.models.window`)."""
-    c = model.config
-    L = c.window
-    ys = [x[j * c.n_y:(j + 1) * c.n_y] for j in range(L)]
-    us = [x[L * c.n_y + j * c.n_u:L * c.n_y + (j + 1) * c.n_u] for j in range(L - 1)] + [un]
-    seen = [y - ys[-1] for y in ys] if c.increment else ys  # increment mode: relative to the newest output
-    samples = [ca.vertcat(y, u) for y, u in zip(seen, us)]
-    n = nets.module_expr(model.net, ca.vertcat(*samples), "net")
-    yn_next = _skip(model, ys[-1], n)
-    return ca.vertcat(*ys[1:], yn_next, *us[1:]), yn_next
-
-
-def _skip(model: StepModel, yn, n):
-    if not model.config.skip:
-        return n
-    return yn + (nets.dm(model.increment_scale) * n if model.config.increment else model.config.skip_scale * n)
 
 
 def to_casadi(model: StepModel, *, verify: bool = True) -> tuple[ca.Function, ca.Function]:

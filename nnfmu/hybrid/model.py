@@ -49,7 +49,7 @@ from nnfmu.hybrid.config import HybridConfig
 from nnfmu.hybrid.fused import fused_step, weight_vector
 from nnfmu.hybrid.parameters import document_system, hide_state_inputs, physics_system
 from nnfmu.models.base import StepModel
-from nnfmu.models.mlp import activation_module
+from nnfmu.models.activation import activation_module
 from nnfmu.physics import PhysicsSystem, rk4_step
 from nnfmu.physics.rk4 import physics_step
 from nnfmu.system import Variable
@@ -145,7 +145,7 @@ class HybridStepModel(StepModel):
         self.physics_log_scale = nn.Parameter(torch.zeros(len(config.train_physics)))
         self.correction = _correction_mlp(config, system.n_x, len(config.corrected_states))
         hide_state_inputs(self.correction[0], [i for i, n in enumerate(states) if n not in config.correction_inputs])
-        self._check_sizes()
+        self.check_sizes()
 
     def _check_units(self, system: PhysicsSystem) -> None:
         """Refuse data whose channels' units differ from the physics' (a subclass may generate its physics)."""
@@ -241,22 +241,22 @@ class HybridStepModel(StepModel):
         return un * self.u_std + self.u_mean
 
     # ---- StepModel core (normalised in, physical state) --------------------------------------
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         p = self.physics_parameters()
         return self._bridge.init_state(self.denormalise_y(yn0), self._denormalise_u(un0), p)[0].to(yn0.dtype)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x_next, y_next = self._advance(x, self._denormalise_u(un), un, self.physics_parameters(), self._plan(x.dtype))
         return x_next, self.normalise_y(y_next)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-        """Free run: the same operations as :meth:`_step_norm`, with ``p`` and ``u`` computed once."""
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+        """Free run: the same operations as :meth:`step_norm`, with ``p`` and ``u`` computed once."""
         out = self._free_run_eager(un, yn0)
         self._check_finite(out)
         return out
 
     def _free_run_eager(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-        """:meth:`_free_run_norm` without the check (what :mod:`nnfmu.hybrid.graphed` records on a GPU)."""
+        """:meth:`free_run_norm` without the check (what :mod:`nnfmu.hybrid.graphed` records on a GPU)."""
         p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused_batch=yn0.shape[0])
         x = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0].to(yn0.dtype)
         ys = [yn0]
@@ -270,10 +270,10 @@ class HybridStepModel(StepModel):
         if self.training and not bool(torch.isfinite(out).all()):
             _warn_blow_up(self)
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
+    def teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor) -> torch.Tensor:
         raise _series_parallel_error()
 
 

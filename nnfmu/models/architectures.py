@@ -8,19 +8,19 @@ export, train, search and offer it on the command line. Its package registers on
         name="toy", config_class="toy_arch.model:ToyConfig", model_class="toy_arch.model:ToyStepModel",
         casadi_step="toy_arch.export:casadi_step", casadi_init="toy_arch.export:casadi_init"))
 
-and every part of the toolkit looks the record up by the config's ``arch`` (:func:`architecture`):
-nothing outside an architecture's own modules tests its name or its class. The record names
-classes and functions either directly or lazily as ``"module:attribute"`` strings, imported on
-first use (:func:`resolve`), so that registering costs no import of torch or CasADi and
-``nnfmu --help`` stays fast.
+and every part of the toolkit looks the record up by the config's ``arch`` (:func:`architecture`), or
+asks the records which names have a capability (:func:`names`, :func:`search_order`): the records are
+the only source of architecture names, and nothing outside an architecture's own folder tests its name
+or its class (tests/test_name_lists.py greps for it). The record names classes and functions either
+directly or lazily as ``"module:attribute"`` strings, imported on first use (:func:`resolve`), so that
+registering costs no import of torch or CasADi and ``nnfmu --help`` stays fast; :func:`check_references`
+resolves them all (a test runs it on every record, so a renamed function fails a test, not a user).
 
-Where the records come from:
-
-- :mod:`nnfmu.models.builtin` registers the five networks (imported with :mod:`nnfmu.models`);
-- a package above ``models`` (``nnfmu.hybrid``, or a third party) registers its own when imported;
-- :func:`load_plugins` imports the modules the entry-point group ``nnfmu.architectures`` names
-  (an installed package: entry name = architecture, value = module, e.g. ``hybrid = "nnfmu.hybrid"``
-  in nnfmu's own ``pyproject.toml``) and those listed in the environment variable ``NNFMU_PLUGINS``
+Where the records come from: every architecture, built in or not, registers its own when its package is
+imported, and :func:`load_plugins` imports the packages that the entry-point group ``nnfmu.architectures``
+names (an installed package: entry name = architecture, value = module; nnfmu's own ``pyproject.toml``
+names the five networks, :mod:`nnfmu.networks`, the ss network, the hybrid and the neural ODE) and those
+listed in the environment variable ``NNFMU_PLUGINS``
   (module names separated by commas, importable from ``sys.path``/``PYTHONPATH``; how a command-line
   user loads an architecture that is not installed as a package). A lookup of an unknown name
   loads them first, so a checkpoint that names a plugin's architecture loads by itself.
@@ -34,20 +34,20 @@ import importlib
 import os
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, TypeAlias, Union
 
 from nnfmu.errors import ConfigError
 from nnfmu.identifiers import is_c_identifier
 
-__all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "architecture", "config_class",
-           "load_plugins", "model_class", "names", "records", "register_architecture", "registered", "resolve",
-           "search_order"]
+__all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "Ref", "architecture",
+           "check_references", "config_class", "is_architecture", "load_plugins", "model_class", "names", "records",
+           "register_architecture", "resolve", "search_order"]
 
 ENTRY_POINT_GROUP = "nnfmu.architectures"
 PLUGINS_ENV = "NNFMU_PLUGINS"
 
-#: A class or function given directly, or lazily as ``"package.module:attribute"``.
-Ref = Any
+#: A class or function given directly, or lazily as ``"package.module:attribute"`` (:func:`resolve`).
+Ref: TypeAlias = Union[type, Callable[..., Any], str]
 
 
 def resolve(ref: Ref):
@@ -105,8 +105,8 @@ class Architecture:
     name : str
         The ``arch`` of its configs, ``nnfmu train --arch NAME``.
     config_class, model_class : class or ``"module:attr"``
-        The frozen config (a :class:`~nnfmu.models.ModelConfig` subclass, or ModelConfig itself for the five
-        networks) and the :class:`~nnfmu.models.StepModel` built from it, ``model_class(config, meta)``.
+        The frozen config (a :class:`~nnfmu.models.ModelConfig` subclass) and the :class:`~nnfmu.models.StepModel`
+        built from it, ``model_class(config, meta)``.
     summary : str
         A few words for ``--arch``'s help.
     casadi_step : ``(model, x, un) -> (x_next, yn_next)``, optional
@@ -118,9 +118,10 @@ class Architecture:
     to_casadi, casadi_model : ``(model, *, verify) -> (init, step)``, ``(model, *, name) -> CasadiModel``, optional
         A whole export instead of ``casadi_step``/``casadi_init`` (a model with ports of its own, such as the
         hybrid's physical parameters), used by :func:`nnfmu.export.to_casadi` and :func:`~nnfmu.export.casadi_model`.
-    rollout_cell : {'rnn', 'lstm', 'gru', 'tcn', 'mlp'}, optional
+    rollout_cell : ``model -> CompiledCell``, optional
         The cell of the compiled free run (:mod:`nnfmu.training.compiled_rollout`) that computes this
-        architecture's step, for a model of exactly ``model_class``; None: torch runs the free run.
+        architecture's step, for a model of exactly ``model_class``: which C file and cell, and the weights in its
+        order (:class:`nnfmu.training.rollout_cells.CompiledCell`); None: torch runs the free run.
     training_rollout : ``model -> free_run or None``, optional
         A faster free run of one training batch, ``free_run(un, yn, past=None) -> (B, T, n_y)`` from ``yn[:, 0]``,
         or None where it does not apply; the trainer calls it once per batch and back-propagates before the next
@@ -164,7 +165,7 @@ class Architecture:
     casadi_init: Ref | None = None
     to_casadi: Ref | None = None
     casadi_model: Ref | None = None
-    rollout_cell: str | None = None
+    rollout_cell: Ref | None = None
     training_rollout: Ref | None = None
     options: tuple[Option, ...] = ()
     grid: Mapping[str, tuple] = field(default_factory=dict)
@@ -200,6 +201,32 @@ class Architecture:
         value = getattr(self, attribute)
         return None if value is None else resolve(value)
 
+    def references(self) -> dict[str, Ref]:
+        """``{where: reference}`` of every class and function the record names (its options' too)."""
+        refs = {name: getattr(self, name) for name in _REFERENCES if getattr(self, name) is not None}
+        for option in self.options:
+            refs.update({f"{option.flag} {name}": getattr(option, name) for name in ("choices", "parse")
+                         if isinstance(getattr(option, name), str) or callable(getattr(option, name))})
+        return refs
+
+
+#: The fields of a record that name a class or function.
+_REFERENCES = ("config_class", "model_class", "casadi_step", "casadi_init", "to_casadi", "casadi_model",
+               "rollout_cell", "training_rollout", "counting_config", "check_device")
+
+
+def check_references(record: Architecture) -> None:
+    """Resolve every reference of ``record``; ConfigError naming the first that does not resolve to a callable."""
+    for where, ref in record.references().items():
+        try:
+            value = resolve(ref)
+        except (ImportError, AttributeError) as exc:
+            raise ConfigError(f"architecture {record.name!r}: its {where} {ref!r} does not resolve ({exc}); "
+                              "fix the reference") from exc
+        if not callable(value):
+            raise ConfigError(f"architecture {record.name!r}: its {where} {ref!r} is {type(value).__name__}, "
+                              "not a class or function")
+
 
 _RECORDS: dict[str, Architecture] = {}
 
@@ -218,11 +245,22 @@ def register_architecture(record: Architecture) -> Architecture:
 _loaded: set[str] = set()
 
 
-def _plugin_modules() -> list[str]:
-    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
+def _entry_points() -> list:
     from importlib.metadata import entry_points
 
-    return [ep.value.split(":")[0] for ep in entry_points(group=ENTRY_POINT_GROUP)] + [m for m in listed if m]
+    return list(entry_points(group=ENTRY_POINT_GROUP))
+
+
+def _plugin_modules() -> list[str]:
+    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
+    return [ep.value.split(":")[0] for ep in _entry_points()] + [m for m in listed if m]
+
+
+def _ordered() -> tuple[Architecture, ...]:
+    """The records registered so far: those the entry points name in their order (as pyproject.toml lists them,
+    whichever was imported first), then the others in registration order."""
+    place = {ep.name: i for i, ep in enumerate(_entry_points())}
+    return tuple(sorted(_RECORDS.values(), key=lambda r: place.get(r.name, len(place))))
 
 
 def load_plugins() -> None:
@@ -245,24 +283,41 @@ def load_plugins() -> None:
 
 
 def architecture(arch: str) -> Architecture:
-    """The record of ``arch``; :class:`ConfigError` listing the known names otherwise."""
+    """The record of ``arch``; :class:`ConfigError` listing the known names otherwise.
+
+    A plugin that cannot be imported fails only the lookup of a name that no other module provides.
+    """
+    failed = None
     if arch not in _RECORDS:
-        load_plugins()
+        try:
+            load_plugins()
+        except ConfigError as exc:
+            failed = exc
     if arch not in _RECORDS:
-        raise ConfigError(f"unknown architecture {arch!r}; choose one of {', '.join(names())}, or make its package "
+        raise ConfigError(f"unknown architecture {arch!r}; choose one of {', '.join(r.name for r in _ordered())}, or make its package "
                           f"known (an entry point in the group {ENTRY_POINT_GROUP!r}, or its module in "
-                          f"{PLUGINS_ENV})")
+                          f"{PLUGINS_ENV})" + ("" if failed is None else f" ({failed})"))
     return _RECORDS[arch]
 
 
+def is_architecture(arch: str) -> bool:
+    """Whether a record of ``arch`` is registered (the plugins loaded first)."""
+    try:
+        architecture(arch)
+    except ConfigError:
+        return False
+    return True
+
+
 def records() -> tuple[Architecture, ...]:
-    """Every architecture's record, the plugins loaded first, in registration order."""
+    """Every architecture's record, the plugins loaded first: those of the entry points in their order, then the
+    others in registration order."""
     load_plugins()
-    return tuple(_RECORDS.values())
+    return _ordered()
 
 
 def names(where: Callable[[Architecture], bool] | None = None) -> tuple[str, ...]:
-    """The names of the architectures (those whose record satisfies ``where``), in registration order."""
+    """The names of the architectures (those whose record satisfies ``where``), in the order of :func:`records`."""
     return tuple(r.name for r in records() if where is None or where(r))
 
 
@@ -270,11 +325,6 @@ def search_order() -> tuple[str, ...]:
     """The architectures ``nnfmu train --max-minutes`` searches: those with a ``search_rank``, lowest first."""
     return tuple(r.name for r in sorted((r for r in records() if r.search_rank is not None),
                                         key=lambda r: r.search_rank))
-
-
-def registered() -> tuple[str, ...]:
-    """The architecture names registered so far, without loading plugins."""
-    return tuple(_RECORDS)
 
 
 def config_class(arch: str) -> type | None:

@@ -59,13 +59,14 @@ def check_meta(meta: Mapping, config: ModelConfig) -> dict:
 
 
 class StepModel(nn.Module):
-    """Base class of the five networks; see the module docstring for the step contract.
+    """Public base of every architecture's model; see the module docstring for the step contract.
 
-    Subclasses implement the normalised core: :meth:`_init_norm`,
-    :meth:`_step_norm`, :meth:`_inject_y` (used by the generic teacher-forced
-    loop) and may override :meth:`_teacher_forced_norm` and
-    :meth:`_free_run_norm` with faster equivalent calls. They call
-    :meth:`_check_sizes` at the end of ``__init__``.
+    Subclasses implement the normalised core, public hooks all (docs/design.md, "Adding an architecture"):
+    :attr:`n_x`, :meth:`init_norm`, :meth:`step_norm`, :meth:`inject_y` (used by the generic teacher-forced
+    loop), and may override :meth:`init_window_norm`, :meth:`teacher_forced_norm` and
+    :meth:`free_run_norm` with faster equivalent calls. They call
+    :meth:`check_sizes` at the end of ``__init__``; :meth:`apply_skip` and :meth:`y_input` give the skip
+    connection and increment mode.
 
     Attributes
     ----------
@@ -102,25 +103,28 @@ class StepModel(nn.Module):
         """Size of the flat state vector."""
         raise NotImplementedError
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        """Initial state ``x0`` (B, n_x) from ``yn0`` (B, n_y) and ``un0`` (B, n_u), normalised: the plant at rest."""
         raise NotImplementedError
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """One step, normalised: ``x`` (B, n_x), ``un`` (B, n_u) -> ``(x_next (B, n_x), yn_next (B, n_y))``."""
         raise NotImplementedError
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
-        """State ``x`` with its newest output ``y_k`` replaced by ``yn`` (teacher forcing)."""
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        """State ``x`` (B, n_x) with its newest output ``y_k`` replaced by ``yn`` (B, n_y) (teacher forcing)."""
         raise NotImplementedError
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
         """Initial state from the init window (B, N, n_y), (B, N, n_u), newest sample last.
 
         Architectures with ``init_window > 1`` override it (:mod:`nnfmu.models.encoder`).
         """
-        return self._init_norm(yn_win[:, -1], un_win[:, -1])
+        return self.init_norm(yn_win[:, -1], un_win[:, -1])
 
-    def _skip(self, yn: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
-        """Apply the optional skip connection: ``y_{k+1} = y_k + scale * N`` or ``N``.
+    def apply_skip(self, yn: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+        """Apply the optional skip connection to ``yn`` and the network's output ``n`` (both (B, n_y), normalised):
+        ``y_{k+1} = y_k + scale * N`` or ``N``.
 
         ``scale`` is ``skip_scale``, or in increment mode the per-output ``increment_scale``.
         """
@@ -128,7 +132,7 @@ class StepModel(nn.Module):
             return n
         return yn + (self.increment_scale if self.config.increment else self.config.skip_scale) * n
 
-    def _y_input(self, yn: torch.Tensor) -> torch.Tensor:
+    def y_input(self, yn: torch.Tensor) -> torch.Tensor:
         """What a one-sample network sees of its newest output: ``yn``, or in increment mode ``yn`` relative to
         itself (zeros): the response must not depend on where the output is."""
         return torch.zeros_like(yn) if self.config.increment else yn
@@ -149,14 +153,14 @@ class StepModel(nn.Module):
         """
         return yn_next - (fed - yn)
 
-    def _check_sizes(self) -> None:
+    def check_sizes(self) -> None:
         """Dry-run init and step at batch 2 so that inconsistent sizes fail at construction."""
         c = self.config
         try:
             with torch.no_grad():
                 dtype = self.u_mean.dtype
-                x0 = self._init_norm(torch.zeros(2, c.n_y, dtype=dtype), torch.zeros(2, c.n_u, dtype=dtype))
-                x1, y1 = self._step_norm(x0, torch.zeros(2, c.n_u, dtype=dtype))
+                x0 = self.init_norm(torch.zeros(2, c.n_y, dtype=dtype), torch.zeros(2, c.n_u, dtype=dtype))
+                x1, y1 = self.step_norm(x0, torch.zeros(2, c.n_u, dtype=dtype))
         except RuntimeError as exc:
             raise ShapeError(f"{type(self).__name__} with {c} has inconsistent layer sizes: {exc}") from exc
         for what, got, want in (("init -> x0", x0.shape, (2, self.n_x)), ("step -> x_next", x1.shape, (2, self.n_x)),
@@ -211,7 +215,7 @@ class StepModel(nn.Module):
         """
         self._check_batch(y0, self.config.n_y, "y0")
         self._check_batch(u0, self.config.n_u, "u0", len(y0))
-        return self._init_window_norm(*self._window(self.normalise_y(y0), self.normalise_u(u0),
+        return self.init_window_norm(*self._window(self.normalise_y(y0), self.normalise_u(u0),
                                                     self._past(y_past, u_past, len(y0))))
 
     def _past(self, y_past, u_past, batch: int) -> tuple | None:
@@ -231,7 +235,7 @@ class StepModel(nn.Module):
         """
         self._check_batch(x, self.n_x, "x")
         self._check_batch(u, self.config.n_u, "u", len(x))
-        x_next, yn_next = self._step_norm(x, self.normalise_u(u))
+        x_next, yn_next = self.step_norm(x, self.normalise_u(u))
         return x_next, self.denormalise_y(yn_next)
 
     def _check_batch(self, a, n: int, name: str, batch: int | None = None) -> None:
@@ -242,39 +246,39 @@ class StepModel(nn.Module):
             raise ShapeError(f"{name} has shape {shape}, expected a tensor of shape {want}")
 
     # ---- sequences ---------------------------------------------------------------------------
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
         """Free run in normalised units: (B, T, n_u), (B, n_y) -> (B, T, n_y), first row ``yn0``.
 
-        ``x0``: the initial state (default ``_init_norm(yn0, un[:, 0])``). ``output``: called once per step, in
+        ``x0``: the initial state (default ``init_norm(yn0, un[:, 0])``). ``output``: called once per step, in
         order, on the step's output (B, n_y); what it returns is the output, fed back (a linear path's sum).
         """
-        x = self._init_norm(yn0, un[:, 0]) if x0 is None else x0
+        x = self.init_norm(yn0, un[:, 0]) if x0 is None else x0
         ys = [yn0]
         noisy = bool(self.feedback_noise and self.training)
         for k in range(un.shape[1] - 1):
             fed = self._feedback(ys[-1]) if noisy else None
-            x, yn = self._step_norm(x if fed is None else self._inject_y(x, fed), un[:, k])
+            x, yn = self.step_norm(x if fed is None else self.inject_y(x, fed), un[:, k])
             if fed is not None and self.config.increment:
                 yn = self._unshifted(yn, fed, ys[-1])
-                x = self._inject_y(x, yn)
+                x = self.inject_y(x, yn)
             if output is not None:
                 yn = output(yn)
-                x = self._inject_y(x, yn)
+                x = self.inject_y(x, yn)
             ys.append(yn)
         return torch.stack(ys, dim=1)
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+    def teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
                              x0: torch.Tensor | None = None) -> torch.Tensor:
         """One-step-ahead predictions of ``yn_meas[:, 1:]`` from ``yn_meas[:, k]``, ``un[:, k]``: (B, T-1, n_y).
 
-        The generic loop over :meth:`_step_norm`; subclasses override it with fused calls.
+        The generic loop over :meth:`step_norm`; subclasses override it with fused calls.
         """
-        x = self._init_norm(yn_meas[:, 0], un[:, 0]) if x0 is None else x0
+        x = self.init_norm(yn_meas[:, 0], un[:, 0]) if x0 is None else x0
         preds = []
         for k in range(un.shape[1] - 1):
-            x = self._inject_y(x, yn_meas[:, k])
-            x, yn = self._step_norm(x, un[:, k])
+            x = self.inject_y(x, yn_meas[:, k])
+            x, yn = self.step_norm(x, un[:, k])
             preds.append(yn)
         return torch.stack(preds, dim=1)
 
@@ -286,10 +290,10 @@ class StepModel(nn.Module):
         """
         x0 = ()
         if past is not None or self.config.init_window > 1:
-            x0 = (self._init_window_norm(*self._window(yn0, un[:, 0], past)),)
+            x0 = (self.init_window_norm(*self._window(yn0, un[:, 0], past)),)
         if yn_meas is None:
-            return self._free_run_norm(un, yn0, *x0)
-        return torch.cat([yn0[:, None], self._teacher_forced_norm(un, yn_meas, *x0)], dim=1)
+            return self.free_run_norm(un, yn0, *x0)
+        return torch.cat([yn0[:, None], self.teacher_forced_norm(un, yn_meas, *x0)], dim=1)
 
     def forward(self, u: torch.Tensor, y0: torch.Tensor, y_meas: torch.Tensor | None = None, *,
                 y_past: torch.Tensor | None = None, u_past: torch.Tensor | None = None) -> torch.Tensor:

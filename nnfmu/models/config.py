@@ -1,8 +1,13 @@
-"""``ModelConfig``: the typed, frozen description of one network (architecture and sizes).
+"""``ModelConfig``: the public base of every architecture's config (the fields every network shares).
 
 A config is everything needed to rebuild a network before its weights are
 loaded, so checkpoints store it as a plain dict (:meth:`ModelConfig.to_dict`)
-and rebuild it with :meth:`ModelConfig.from_dict`.
+and rebuild it with :meth:`ModelConfig.from_dict`. Each architecture subclasses it in its
+own folder (``nnfmu/networks/<name>/config.py``, ``nnfmu/ss/config.py``, a plugin's) and names the
+subclass in its record (:mod:`nnfmu.models.architectures`); ``ModelConfig(arch=NAME, ...)`` and
+:meth:`ModelConfig.from_dict` build that subclass, so this module knows no architecture by name.
+A subclass adapts the shared rules through the public hooks :meth:`~ModelConfig.default_layers`
+and :meth:`~ModelConfig.resolve_window`.
 """
 
 from __future__ import annotations
@@ -14,32 +19,33 @@ from typing import Mapping
 from nnfmu.errors import ConfigError, ShapeError, check_options
 from nnfmu.models import architectures
 
-ARCHS = ("mlp", "rnn", "lstm", "gru", "tcn")
-RECURRENT_ARCHS = ("rnn", "lstm", "gru")
-WINDOW_ARCHS = ("mlp", "tcn")
 ACTIVATIONS = ("tanh", "relu", "sigmoid", "elu", "silu")
-# nn.RNN only knows these two nonlinearities.
-RNN_ACTIVATIONS = ("tanh", "relu")
-
-# Per-architecture defaults for the options left as None.
-_DEFAULT_LAYERS = {"mlp": 2, "rnn": 1, "lstm": 1, "gru": 1, "tcn": 3}
-_DEFAULT_MLP_WINDOW = 4
 # What the members of one ensemble share: their ports, the window their init sees, their linear path, their mode.
 MEMBER_SHARED = ("n_u", "n_y", "init_window", "linear_order", "increment")
 
 
-def tcn_receptive_field(layers: int, kernel_size: int) -> int:
-    """Number of past samples a TCN with dilations 1, 2, 4, ... sees: ``1 + (k-1)(2^layers - 1)``."""
-    return 1 + (kernel_size - 1) * (2 ** layers - 1)
+def _config_class(arch) -> type:
+    """The config class the record of ``arch`` names (a ModelConfig subclass); ConfigError otherwise."""
+    cls = architectures.architecture(str(arch)).get("config_class")
+    if not (isinstance(cls, type) and issubclass(cls, ModelConfig)):
+        raise ConfigError(f"the record of architecture {arch!r} names the config class {cls!r}, which is not a "
+                          "ModelConfig subclass; fix its config_class")
+    return cls
 
 
 @dataclass(frozen=True, kw_only=True)
 class ModelConfig:
-    """Architecture and sizes of a step network.
+    """Architecture and sizes of a step network: the fields every architecture shares.
+
+    ``ModelConfig(arch=NAME, ...)`` builds the config class that ``NAME``'s record names (e.g.
+    :class:`~nnfmu.networks.recurrent.config.RecurrentConfig` for ``"gru"``), as ``pathlib.Path``
+    builds the path of its platform; the fields' defaults and checks below are the shared ones, and
+    each architecture documents what its own rules add.
 
     Attributes
     ----------
-    arch : {'mlp', 'rnn', 'lstm', 'gru', 'tcn'}
+    arch : str
+        A registered architecture's name (:func:`nnfmu.models.architectures.names`).
     n_u, n_y : int
         Number of inputs and outputs of the system.
     hidden : int
@@ -47,12 +53,10 @@ class ModelConfig:
     layers : int or None
         Hidden layers (MLP), stacked recurrent layers, or dilated convolution
         layers (TCN, dilation ``2**i`` in layer ``i``). None picks the
-        architecture's default: MLP 2, RNN/LSTM/GRU 1, TCN 3.
+        architecture's default (:meth:`default_layers`).
     window : int or None
-        ``L``, the number of past samples of ``[y, u]`` the network sees. MLP:
-        free (default 4). TCN: must equal its receptive field
-        ``1 + (kernel_size-1)(2**layers - 1)`` (None computes it). Recurrent
-        networks see one sample, so their window is 1.
+        ``L``, the number of past samples of ``[y, u]`` the network sees (:meth:`resolve_window`;
+        1 for a network whose memory is its state).
     kernel_size : int
         TCN convolution kernel size (ignored otherwise).
     dropout : float
@@ -110,8 +114,13 @@ class ModelConfig:
     member_configs: tuple = dataclasses.field(default=(), hash=False)
     linear_order: int = 0
 
+    def __new__(cls, *args, **kwargs):
+        if cls is ModelConfig and "arch" in kwargs:
+            cls = _config_class(kwargs["arch"])
+        return super().__new__(cls)
+
     def __post_init__(self) -> None:
-        self._check_arch()
+        self.check_arch()
         for name in ("n_u", "n_y", "hidden", "kernel_size", "init_window", "encoder_hidden", "members"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -123,13 +132,14 @@ class ModelConfig:
             raise ConfigError("increment mode and a linear path both carry the output from step to step: the path "
                               "(linear_order > 0) already integrates what the linear model integrates; drop increment "
                               "or set linear_order=0")
-        if self.arch == "tcn" and self.kernel_size < 2:
-            raise ShapeError(f"a TCN needs kernel_size >= 2, got {self.kernel_size}")
         if self.layers is None:
-            object.__setattr__(self, "layers", self._default_layers())
+            object.__setattr__(self, "layers", self.default_layers())
         if not isinstance(self.layers, int) or self.layers < 1:
             raise ShapeError(f"ModelConfig.layers must be a positive integer, got {self.layers!r}")
-        object.__setattr__(self, "window", self._resolve_window())
+        w = self.window
+        if w is not None and (not isinstance(w, int) or isinstance(w, bool) or w < 1):
+            raise ShapeError(f"ModelConfig.window must be a positive integer, got {w!r}")
+        object.__setattr__(self, "window", self.resolve_window())
         if not 0.0 <= float(self.dropout) < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout!r}")
         object.__setattr__(self, "dropout", float(self.dropout))
@@ -138,7 +148,7 @@ class ModelConfig:
         object.__setattr__(self, "increment", bool(self.increment))
         if self.increment and not self.skip:
             raise ConfigError("increment=True predicts y_{k+1} - y_k, which needs skip=True; drop skip=False")
-        valid_act = RNN_ACTIVATIONS if self.arch == "rnn" else ACTIVATIONS
+        valid_act = self.activations()
         if self.activation not in valid_act:
             raise ConfigError(f"activation {self.activation!r} is not available for arch {self.arch!r}; "
                               f"choose one of {', '.join(valid_act)}")
@@ -165,34 +175,30 @@ class ModelConfig:
                                      f"{', '.join(MEMBER_SHARED)}")
         object.__setattr__(self, "member_configs", configs)
 
-    # ---- what a subclass of another architecture overrides (a plugin's config, docs/design.md) -------------
-    def _check_arch(self) -> None:
-        """Raise ConfigError unless ``arch`` is one this class describes (here: the five networks)."""
-        if self.arch not in ARCHS:
-            raise ConfigError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
+    # ---- what an architecture's config overrides (docs/design.md, "Adding an architecture") --------------
+    def check_arch(self) -> None:
+        """Raise ConfigError unless the record of ``arch`` names this config's class (or a base of it)."""
+        if not isinstance(self, _config_class(self.arch)):
+            raise ConfigError(f"{type(self).__name__} cannot describe arch {self.arch!r}, whose config is "
+                              f"{_config_class(self.arch).__name__}; build it with ModelConfig(arch={self.arch!r}, ...)")
 
-    def _default_layers(self) -> int:
-        """``layers`` when left out."""
-        return _DEFAULT_LAYERS[self.arch]
+    def default_layers(self) -> int:
+        """``layers`` when left out (here 1)."""
+        return 1
 
-    def _resolve_window(self) -> int:
-        """The window ``L`` (samples seen per step) from the given ``window`` (None: the default)."""
-        w = self.window
-        if w is not None and (not isinstance(w, int) or isinstance(w, bool) or w < 1):
-            raise ShapeError(f"ModelConfig.window must be a positive integer, got {w!r}")
-        if self.arch in RECURRENT_ARCHS:
-            if w not in (None, 1):
-                raise ShapeError(f"a {self.arch.upper()} sees one sample per step (its memory is the hidden "
-                                 f"state), so window must be 1, got {w}; leave window out")
-            return 1
-        if self.arch == "tcn":
-            field = tcn_receptive_field(self.layers, self.kernel_size)
-            if w not in (None, field):
-                raise ShapeError(f"a TCN with {self.layers} layers and kernel_size {self.kernel_size} sees "
-                                 f"{field} samples, got window={w}; pass window={field}, leave it out, or "
-                                 "change layers/kernel_size")
-            return field
-        return _DEFAULT_MLP_WINDOW if w is None else w
+    def resolve_window(self) -> int:
+        """The window ``L`` (samples seen per step) from the given ``window`` (None: the default; a positive int).
+
+        Here: one sample per step, the state is the memory.
+        """
+        if self.window not in (None, 1):
+            raise ShapeError(f"a {self.arch} network sees one sample per step (its memory is its state), so window "
+                             f"must be 1, got {self.window}; leave window out")
+        return 1
+
+    def activations(self) -> tuple[str, ...]:
+        """The names ``activation`` may take (here :data:`ACTIVATIONS`)."""
+        return ACTIVATIONS
 
     @property
     def n_in(self) -> int:
@@ -211,13 +217,11 @@ class ModelConfig:
     def from_dict(cls, d: Mapping) -> "ModelConfig":
         """Rebuild from :meth:`to_dict`; unknown keys raise :class:`~nnfmu.errors.UnknownOptionError`.
 
-        An architecture registered by another package (:mod:`nnfmu.models.architectures`: the hybrid,
-        a plugin) is rebuilt by its own config class.
+        Called on ModelConfig, the config class of ``d["arch"]``'s record rebuilds it
+        (:mod:`nnfmu.models.architectures`).
         """
-        if cls is ModelConfig and isinstance(d, Mapping) and d.get("arch") not in ARCHS:
-            other = architectures.config_class(str(d.get("arch")))
-            if other is not None and other is not cls:
-                return other.from_dict(d)
+        if cls is ModelConfig and isinstance(d, Mapping) and "arch" in d:
+            return _config_class(d["arch"]).from_dict(d)
         check_options(d, {f.name for f in dataclasses.fields(cls)}, cls.__name__)
         d = dict(d)
         if isinstance(d.get("member_configs"), list):  # read back from JSON
@@ -225,11 +229,23 @@ class ModelConfig:
         return cls(**d)
 
     def replace(self, **changes) -> "ModelConfig":
-        """A copy with ``changes``; sizes derived from the changed fields are recomputed."""
+        """A copy with ``changes``; sizes derived from the changed fields are recomputed.
+
+        A new ``arch`` of another config class keeps the shared fields (those of ModelConfig) only.
+        """
         check_options(changes, {f.name for f in dataclasses.fields(self)}, "ModelConfig")
         if "arch" in changes:
             changes.setdefault("layers", None)
-        if {"arch", "layers", "kernel_size"} & set(changes):
-            changes.setdefault("window", None if self.arch != "mlp" or "arch" in changes else self.window)
+            changes.setdefault("window", None)
+            if _config_class(changes["arch"]) is not type(self):
+                shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(ModelConfig)}
+                return ModelConfig(**{**shared, **changes})
+        if {"layers", "kernel_size"} & set(changes):
+            changes.setdefault("window", self.kept_window())
         return dataclasses.replace(self, **changes)
+
+    def kept_window(self) -> int | None:
+        """The ``window`` that :meth:`replace` keeps when ``layers`` or ``kernel_size`` change (here None: derived
+        again); a network whose window is free of them keeps its own."""
+        return None
 

@@ -60,7 +60,7 @@ class EnsembleStepModel(StepModel):
             raise ShapeError(f"an ensemble needs members >= 2, got {config.members}; build a single network instead")
         configs = member_configs(config)
         self.members = nn.ModuleList(single_model_class(c)(c, meta) for c in configs)
-        self._check_sizes()
+        self.check_sizes()
 
     @classmethod
     def from_members(cls, models: Sequence[StepModel]) -> "EnsembleStepModel":
@@ -109,16 +109,16 @@ class EnsembleStepModel(StepModel):
     def _parts(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
         return torch.split(x, [m.n_x for m in self.members], dim=1)
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
-        return torch.cat([m._init_norm(yn0, un0) for m in self.members], dim=1)
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m.init_norm(yn0, un0) for m in self.members], dim=1)
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
-        return torch.cat([m._init_window_norm(yn_win, un_win) for m in self.members], dim=1)
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m.init_window_norm(yn_win, un_win) for m in self.members], dim=1)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        steps = [m._step_norm(part, un) for m, part in zip(self.members, self._parts(x))]
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        steps = [m.step_norm(part, un) for m, part in zip(self.members, self._parts(x))]
         yn = torch.stack([y for _, y in steps]).mean(0)
-        return self._inject_y(torch.cat([x_next for x_next, _ in steps], dim=1), yn), yn
+        return self.inject_y(torch.cat([x_next for x_next, _ in steps], dim=1), yn), yn
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
-        return torch.cat([m._inject_y(part, yn) for m, part in zip(self.members, self._parts(x))], dim=1)
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+        return torch.cat([m.inject_y(part, yn) for m, part in zip(self.members, self._parts(x))], dim=1)

@@ -61,7 +61,7 @@ class LinearPathStepModel(StepModel):
         self.register_buffer("lin_Ky", torch.zeros(n, n_y))  # z0 = Ky yn0 + Ku un0 + k0 (normalised units)
         self.register_buffer("lin_Ku", torch.zeros(n, n_u))
         self.register_buffer("lin_k0", torch.zeros(n))
-        self._check_sizes()
+        self.check_sizes()
 
     # ---- the linear model, in normalised units ---------------------------------------------------
     #: The arrays :meth:`set_path` takes: the fixed linear model, its initial-state rule and the correction's gains.
@@ -99,24 +99,24 @@ class LinearPathStepModel(StepModel):
     def _z0(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         return yn0 @ self.lin_Ky.T + un0 @ self.lin_Ku.T + self.lin_k0
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
-        return torch.cat([self.net._init_norm(yn0, un0), self._z0(yn0, un0)], dim=1)
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.net.init_norm(yn0, un0), self._z0(yn0, un0)], dim=1)
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
-        return torch.cat([self.net._init_window_norm(yn_win, un_win), self._z0(yn_win[:, -1], un_win[:, -1])], dim=1)
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.net.init_window_norm(yn_win, un_win), self._z0(yn_win[:, -1], un_win[:, -1])], dim=1)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h, z = self._split(x)
-        h_next, n = self.net._step_norm(h, un)
+        h_next, n = self.net.step_norm(h, un)
         z_next = z @ self.lin_A.T + un @ self.lin_B.T + self.lin_b + n @ self.lin_G.T
         yn = z_next @ self.lin_C.T + self.lin_d + self.alpha * n
-        return torch.cat([self.net._inject_y(h_next, yn), z_next], dim=1), yn
+        return torch.cat([self.net.inject_y(h_next, yn), z_next], dim=1), yn
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
         """The network's own (fast) free run, its every raw output turned into the path's output on the way.
 
-        Equal to the loop over :meth:`_step_norm`; the network's loop keeps its own state layout (the MLP's window
+        Equal to the loop over :meth:`step_norm`; the network's loop keeps its own state layout (the MLP's window
         tensor: 2 concatenations a step instead of packing ``[h | z]``).
         """
         h0, z = (None, self._z0(yn0, un[:, 0])) if x0 is None else self._split(x0)
@@ -130,19 +130,19 @@ class LinearPathStepModel(StepModel):
 
         self.net.feedback_noise = self.feedback_noise  # the network's loop disturbs what it feeds back
         try:
-            return self.net._free_run_norm(un, yn0, h0, path_output)
+            return self.net.free_run_norm(un, yn0, h0, path_output)
         finally:
             self.net.feedback_noise = 0.0
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         h, z = self._split(x)
-        return torch.cat([self.net._inject_y(h, yn), z], dim=1)
+        return torch.cat([self.net.inject_y(h, yn), z], dim=1)
 
 
 def y_slot(model: StepModel) -> list[int]:
-    """Positions in the flat state where ``model._inject_y`` writes the fed-back output, in output order."""
+    """Positions in the flat state where ``model.inject_y`` writes the fed-back output, in output order."""
     n_y, dtype = model.config.n_y, model.u_mean.dtype
     with torch.no_grad():
         probe = torch.arange(1, n_y + 1, dtype=dtype)[None]
-        x = model._inject_y(torch.zeros(1, model.n_x, dtype=dtype), probe)[0].cpu().numpy()
+        x = model.inject_y(torch.zeros(1, model.n_x, dtype=dtype), probe)[0].cpu().numpy()
     return [int(np.flatnonzero(x == j + 1)[0]) for j in range(n_y)]

@@ -1,7 +1,8 @@
 """``build_model``: a fresh network of the architecture a :class:`ModelConfig` names.
 
-The model class comes from the architecture's record (:mod:`nnfmu.models.architectures`): the five
-networks' (:mod:`nnfmu.models.builtin`), or those other packages register (``nnfmu.hybrid``, plugins).
+The model class comes from the architecture's record (:mod:`nnfmu.models.architectures`), which every
+architecture registers from its own folder (the five networks, :mod:`nnfmu.networks`; ``nnfmu.ss``,
+``nnfmu.hybrid``, plugins).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Window models (MLP, TCN): the network sees the last ``L`` samples of ``[y, u]``.
 
 The MLP's flat state, in normalised units (what the FMU carries), is that window
-(the TCN keeps delay lines instead: :mod:`nnfmu.models.tcn_state`)::
+(the TCN keeps delay lines instead: :mod:`nnfmu.networks.tcn.state`)::
 
     x = [ y_{k-L+1} | ... | y_k   (L * n_y) | u_{k-L+1} | ... | u_{k-1}   ((L-1) * n_u) ]
 
@@ -13,7 +13,7 @@ measured samples before t0 fill it instead (:mod:`nnfmu.models.encoder`).
 Teacher forcing pads the measured sequence on the left the same way and
 evaluates all windows in one fused call. In increment mode the MLP sees the
 window's outputs relative to its newest one, ``y_j - y_k`` (the TCN: each
-first-layer column relative to its own newest tap, :mod:`nnfmu.models.tcn_state`).
+first-layer column relative to its own newest tap, :mod:`nnfmu.networks.tcn.state`).
 """
 
 from __future__ import annotations
@@ -50,11 +50,11 @@ class WindowStepModel(StepModel):
         """``padded`` (B, T + L - 1, n_y + n_u) -> ``N`` of each of its T windows (B, T, n_y)."""
         raise NotImplementedError
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         L = self.config.window
         return torch.cat([yn0.repeat(1, L), un0.repeat(1, L - 1)], dim=1)
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
         """The measured window gives the state: its last ``L`` outputs and the ``L - 1`` inputs before ``u0``
         (padded in front with the window's oldest sample when it is shorter than ``L``)."""
         L = self.config.window
@@ -75,22 +75,22 @@ class WindowStepModel(StepModel):
         y_old = x[:, :split - c.n_y].reshape(B, c.window - 1, c.n_y)
         return torch.cat([y_old, x[:, split:].reshape(B, c.window - 1, c.n_u)], dim=2)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         c, B = self.config, x.shape[0]
         split = c.window * c.n_y
         y_win = x[:, :split].reshape(B, c.window, c.n_y)
         u_win = torch.cat([x[:, split:].reshape(B, c.window - 1, c.n_u), un[:, None]], dim=1)
         yn_k = y_win[:, -1]
-        yn_next = self._skip(yn_k, self._predict_windows(self._relative(torch.cat([y_win, u_win], dim=2))))
+        yn_next = self.apply_skip(yn_k, self._predict_windows(self._relative(torch.cat([y_win, u_win], dim=2))))
         x_next = torch.cat([y_win[:, 1:].reshape(B, -1), yn_next, u_win[:, 1:].reshape(B, -1)], dim=1)
         return x_next, yn_next
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
         """Free run on a window tensor instead of the flat state: 2 concatenations per step instead of 6.
 
-        The network sees the same numbers in the same layout as in :meth:`_step_norm`, so the
-        result is identical. ``output`` as in :meth:`StepModel._free_run_norm`.
+        The network sees the same numbers in the same layout as in :meth:`step_norm`, so the
+        result is identical. ``output`` as in :meth:`StepModel.free_run_norm`.
         """
         if x0 is None:  # the rest state
             samples = torch.cat([yn0, un[:, 0]], dim=1)[:, None].expand(-1, self.config.window - 1, -1)
@@ -101,7 +101,7 @@ class WindowStepModel(StepModel):
         for un_k in un[:, :-1].unbind(1):
             fed = self._feedback(yn)
             window = torch.cat([samples, torch.cat([fed, un_k], dim=1)[:, None]], dim=1)
-            y_next = self._skip(fed, self._predict_windows(self._relative(window)))
+            y_next = self.apply_skip(fed, self._predict_windows(self._relative(window)))
             yn = self._unshifted(y_next, fed, yn) if noisy_increments else y_next
             yn = yn if output is None else output(yn)
             ys.append(yn)
@@ -120,23 +120,23 @@ class WindowStepModel(StepModel):
             raise ShapeError(f"the window has shapes {tuple(yn_window.shape)} and {tuple(un_window.shape)}, expected "
                              f"(B, {c.window}, {c.n_y}) and (B, {c.window - 1}, {c.n_u})")
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         split = self.config.window * self.config.n_y
         return torch.cat([x[:, :split - self.config.n_y], yn, x[:, split:]], dim=1)
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+    def teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
                              x0: torch.Tensor | None = None) -> torch.Tensor:
         """Fused: every window of the measured sequence in one call of the network.
 
         In increment mode each window is made relative to its own newest output, so the windows are
-        cut out (unfold) and the network sees them one by one, as in :meth:`_step_norm`.
+        cut out (unfold) and the network sees them one by one, as in :meth:`step_norm`.
         """
         feed = yn_meas[:, :-1]
         seq = torch.cat([feed, un[:, :-1]], dim=2)
         older = seq[:, :1].expand(-1, self.config.window - 1, -1) if x0 is None else self._samples(x0)
         padded = torch.cat([older, seq], dim=1)
         if not (self.config.increment and self.relative_window):
-            return self._skip(feed, self._predict_sequence(padded))
+            return self.apply_skip(feed, self._predict_sequence(padded))
         windows = padded.unfold(1, self.config.window, 1).transpose(2, 3)  # (B, T-1, L, C)
         flat = self._relative(windows.reshape(-1, *windows.shape[2:]))
-        return self._skip(feed, self._predict_windows(flat).reshape(*feed.shape))
+        return self.apply_skip(feed, self._predict_windows(flat).reshape(*feed.shape))

@@ -13,20 +13,18 @@ found through the entry-point group ``nnfmu.architectures`` (``ss = "nnfmu.ss"``
 
 from typing import TYPE_CHECKING
 
-from nnfmu._lazy import lazy_exports
-from nnfmu.models.architectures import Architecture, Option, register_architecture
+from nnfmu._lazy import declared_exports
+from nnfmu.models.architectures import Architecture as _Architecture
+from nnfmu.models.architectures import Option as _Option
+from nnfmu.models.architectures import register_architecture as _register
 
-_LAZY = {"SS_ARCH": "nnfmu.ss.config", "SSConfig": "nnfmu.ss.config", "SSStepModel": "nnfmu.ss.model"}
-
-if TYPE_CHECKING:  # what _LAZY imports on first use
+if TYPE_CHECKING:  # each public name, declared once, imported on first use (nnfmu._lazy.declared_exports)
     from nnfmu.ss.config import SS_ARCH, SSConfig
     from nnfmu.ss.model import SSStepModel
 
-__all__ = ["SSConfig", "SSStepModel", "SS_ARCH"]
+__getattr__, __dir__, __all__ = declared_exports(globals())
 
-__getattr__, __dir__ = lazy_exports("nnfmu.ss", globals(), _LAZY)
-
-register_architecture(Architecture(
+_register(_Architecture(
     name="ss",
     config_class="nnfmu.ss.config:SSConfig",
     model_class="nnfmu.ss.model:SSStepModel",
@@ -34,7 +32,7 @@ register_architecture(Architecture(
             "an encoder for z0",
     casadi_step="nnfmu.ss.export:casadi_step",
     casadi_init="nnfmu.ss.export:casadi_init",
-    options=(Option(flag="--ss-states", field="states", type="int", metavar="N", bounds=(1, None),
+    options=(_Option(flag="--ss-states", field="states", type="int", metavar="N", bounds=(1, None),
                     help="the ss network's latent states (default: the linear path's order, or max(2 n_y, 4) "
                          "without a path)"),),
     grid={"layers": (1, 2)},

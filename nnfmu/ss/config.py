@@ -45,14 +45,10 @@ class SSConfig(ModelConfig):
             raise ShapeError(f"the ss network's state ({s}) must hold its linear path's {self.linear_order} states; "
                              f"pass states >= {self.linear_order} or leave it out")
 
-    def _check_arch(self) -> None:
-        if self.arch != SS_ARCH:
-            raise ConfigError(f"SSConfig has arch {SS_ARCH!r}, got {self.arch!r}")
-
-    def _default_layers(self) -> int:
+    def default_layers(self) -> int:
         return 2
 
-    def _resolve_window(self) -> int:
+    def resolve_window(self) -> int:
         if self.window not in (None, 1):
             raise ShapeError(f"the ss network's memory is its state: it sees one sample per step, so window must "
                              f"be 1, got {self.window}; leave window out")

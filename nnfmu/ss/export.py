@@ -10,7 +10,7 @@ from nnfmu.export import casadi_layers as nets
 
 
 def casadi_step(model, x, un):
-    """``(x_next, yn_next)`` of :meth:`nnfmu.ss.model.SSStepModel._step_norm` (``x``, ``un``: MX columns)."""
+    """``(x_next, yn_next)`` of :meth:`nnfmu.ss.model.SSStepModel.step_norm` (``x``, ``un``: MX columns)."""
     n_y = model.config.n_y
     z = x[n_y:]
     A, B, b, C, d = (nets.dm(getattr(model, k)) for k in ("lin_A", "lin_B", "lin_b", "lin_C", "lin_d"))

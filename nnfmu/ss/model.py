@@ -37,7 +37,7 @@ from torch.nn import functional as F
 from nnfmu.errors import ShapeError
 from nnfmu.models import StepModel
 from nnfmu.models.encoder import encoder_input, make_encoder
-from nnfmu.models.mlp import activation_module
+from nnfmu.models.activation import activation_module
 from nnfmu.ss.config import SSConfig
 
 
@@ -82,7 +82,7 @@ class SSStepModel(StepModel):
         for name, shape in (("lin_A", (s, s)), ("lin_B", (s, n_u)), ("lin_b", (s,)), ("lin_C", (n_y, s)),
                             ("lin_d", (n_y,)), ("lin_Ky", (s, n_y)), ("lin_Ku", (s, n_u)), ("lin_k0", (s,))):
             self.register_buffer(name, torch.zeros(shape))  # the identified linear model: held fixed
-        self._check_sizes()
+        self.check_sizes()
 
     def set_path(self, values: Mapping) -> None:
         """Set the linear model from :func:`~nnfmu.training.linear_start.path_arrays` (normalised units).
@@ -114,12 +114,12 @@ class SSStepModel(StepModel):
     def _z0(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         return yn0 @ self.lin_Ky.T + un0 @ self.lin_Ku.T + self.lin_k0
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         c = self.config
-        return self._init_window_norm(yn0[:, None].expand(-1, c.init_window, -1),
+        return self.init_window_norm(yn0[:, None].expand(-1, c.init_window, -1),
                                       un0[:, None].expand(-1, c.init_window, -1))
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
         yn0 = yn_win[:, -1]
         z0 = self._z0(yn0, un_win[:, -1]) + _run(self.encoder, encoder_input(yn_win, un_win, relative=False))
         return torch.cat([yn0, z0], dim=1)
@@ -130,21 +130,21 @@ class SSStepModel(StepModel):
     def _output(self, z: torch.Tensor) -> torch.Tensor:
         return z @ self.lin_C.T + self.lin_d + self.scale * _run(self.h, z)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         z_next = self._state_next(x[:, self.config.n_y:], un)
         yn = self._output(z_next)
         return torch.cat([yn, z_next], dim=1), yn
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
         """The loop over the state alone, the outputs of all steps in one call afterwards (none is fed back).
 
-        Equal to the loop over :meth:`_step_norm`; ``output`` (an ensemble's mean) is called per step.
+        Equal to the loop over :meth:`step_norm`; ``output`` (an ensemble's mean) is called per step.
         """
-        x = self._init_norm(yn0, un[:, 0]) if x0 is None else x0
+        x = self.init_norm(yn0, un[:, 0]) if x0 is None else x0
         z = x[:, self.config.n_y:]
         if output is not None:
             ys = [yn0]

@@ -58,7 +58,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 from nnfmu.errors import ConfigError, check_options
-from nnfmu.models import ARCHS
+from nnfmu.models import architectures
 from nnfmu.physics import StudyPreset, study_names, study_preset
 from nnfmu.study import presets
 from nnfmu.study.hyper import Hyper
@@ -91,7 +91,8 @@ class Budget:
         White Gaussian measurement noise added to the outputs of generated data, as a fraction of
         each output's training standard deviation, in every split (the paper's data were measured).
     archs, strategies : tuple of str
-        The networks trained: every architecture with every strategy.
+        The networks trained: every architecture (default: those ``hyper`` covers, in its order; each a registered
+        one) with every strategy.
     epochs, patience : int
         Maximum epochs and early-stopping patience of every training: the budget proper, so that
         a seed gives the same table on any machine.
@@ -128,7 +129,7 @@ class Budget:
     max_test: int | None = None
     valid_fraction: float = 0.1
     noise: float = 0.0
-    archs: tuple[str, ...] = ARCHS
+    archs: tuple[str, ...] = ()
     strategies: tuple[str, ...] = STRATEGIES
     epochs: int
     patience: int
@@ -145,10 +146,12 @@ class Budget:
     threads: int = 1
 
     def __post_init__(self) -> None:
-        unknown = [a for a in self.archs if a not in ARCHS] + [s for s in self.strategies if s not in STRATEGIES]
+        object.__setattr__(self, "archs", tuple(self.archs or self.hyper))
+        unknown = [a for a in self.archs if not architectures.is_architecture(a)]
+        unknown += [s for s in self.strategies if s not in STRATEGIES]
         if unknown:
-            raise ConfigError(f"budget {self.name!r}: unknown architecture or strategy {unknown}; "
-                              f"valid: {', '.join(ARCHS + STRATEGIES)}")
+            raise ConfigError(f"budget {self.name!r}: unknown architecture or strategy {unknown}; valid: "
+                              f"{', '.join(architectures.names() + STRATEGIES)}")
         if isinstance(self.seeds, bool) or not isinstance(self.seeds, int) or self.seeds < 1:
             raise ConfigError(f"budget {self.name!r}: seeds must be a positive integer, got {self.seeds!r}")
         if self.keep not in KEEP:
@@ -223,13 +226,12 @@ _MEASURED = {"valve": (presets.VALVE, presets.VALVE_QUICK), "arm": (presets.ARM,
 # nnfmu demo (nnfmu.study.demo): a parallel and a series-parallel GRU on the valve at equal budgets.
 _DEMO = {"valve": Budget(name="demo", description="nnfmu demo: a parallel and a series-parallel GRU at equal budgets "
                                                   "(20 epochs on windows of 100 samples) on the paper-size valve data",
-                         data_size="paper", noise=VALVE_NOISE, archs=("gru",), epochs=20, patience=10,
-                         max_minutes=SAFETY_NET_MINUTES, hyper={"gru": Hyper(hidden=32, truncate=100)},
-                         linear={"refine": False})}
+                         data_size="paper", noise=VALVE_NOISE, epochs=20, patience=10,
+                         max_minutes=SAFETY_NET_MINUTES, hyper=presets.DEMO, linear={"refine": False})}
 
 
 def _study_budgets(name: str) -> Mapping[str, Budget]:
-    start = {a: presets.preset_for(a) for a in ARCHS}
+    start = {a: presets.preset_for(a) for a in presets.SMOKE}  # the networks the tables cover
     hyper, quick_hyper = _MEASURED.get(name, (start, start))
     extra = {"demo": _DEMO[name]} if name in _DEMO else {}
     return MappingProxyType({**_budgets(study_preset(name)[1], hyper, quick_hyper), **extra})

@@ -13,7 +13,7 @@ import typing
 from typing import Mapping
 
 from nnfmu.errors import check_options
-from nnfmu.models import ARCHS, ModelConfig, architectures
+from nnfmu.models import ModelConfig, architectures
 from nnfmu.training import TrainConfig
 
 #: ModelConfig fields a run sets: the architecture and the system's sizes, the seeds (members) or the members of
@@ -80,5 +80,6 @@ Attributes
 
 
 def per_arch(**hyper: Hyper) -> dict[str, Hyper]:
-    """``{arch: Hyper}`` in the order of :data:`nnfmu.models.ARCHS`."""
-    return {a: hyper[a] for a in ARCHS if a in hyper}
+    """``{arch: Hyper}`` in the order given (the keywords name architectures; :class:`~nnfmu.study.budgets.Budget`
+    checks them against the records)."""
+    return dict(hyper)

@@ -1,15 +1,16 @@
 """The preset hyperparameters of every system, with the measurements that chose them (validation only).
 
-:mod:`nnfmu.study.budgets` assembles them into budgets. The tables cover the paper's five networks; the
-per-architecture parts of the grids (the depths) and the start of an architecture no table covers
-(:func:`preset_for`, ``nnfmu tune --arch PLUGIN``) come from the architectures' records
+:mod:`nnfmu.study.budgets` assembles them into budgets. The tables cover the paper's five networks (their
+keyword arguments name them; every table covers the same ones, :data:`SMOKE`'s); the per-architecture parts of
+the grids (the depths) and the start of an architecture no table covers (:func:`preset_for`,
+``nnfmu tune --arch PLUGIN``) come from the architectures' records
 (:mod:`nnfmu.models.architectures`). The figures quoted are free-run NRMSE,
 validation / test, seed 0 unless said otherwise; the test split was never used to choose.
 """
 
 from __future__ import annotations
 
-from nnfmu.models import ARCHS, architectures
+from nnfmu.models import architectures
 from nnfmu.study.hyper import Hyper, per_arch
 
 # Tiny networks for the smoke runs: every architecture, a few hundred weights.
@@ -18,7 +19,7 @@ SMOKE = per_arch(
     lstm=Hyper(hidden=8, batch_size=16), gru=Hyper(hidden=8, batch_size=16),
     tcn=Hyper(hidden=8, layers=2, batch_size=16),
 )
-SMOKE_GRID = {a: {"hidden": (4, 8)} for a in ARCHS}
+SMOKE_GRID = {a: {"hidden": (4, 8)} for a in SMOKE}
 LINEAR_SMOKE = {"refine": False, "max_order": 8}
 
 # Valve: plenty of diverse data (900 trajectories), so no dropout; Ts = 40 us, 500-step trajectories.
@@ -77,13 +78,19 @@ SLIDER = per_arch(
 )
 
 
+# nnfmu demo: the GRU of the valve's 'quick' budget on windows of 100 samples.
+DEMO = per_arch(gru=Hyper(hidden=32, truncate=100))
+
+
 def quick_grid() -> dict:
-    return {a: {"hidden": (16, 32), "lr": (1e-3, 3e-3)} for a in ARCHS}
+    """Width and learning rate, for every architecture the tables cover."""
+    return {a: {"hidden": (16, 32), "lr": (1e-3, 3e-3)} for a in SMOKE}
 
 
 def paper_grid() -> dict:
-    """Width and learning rate, and each architecture's own part (its record's ``grid``: the depths)."""
-    return {a: {"hidden": (16, 32, 64), **architectures.architecture(a).grid, "lr": (1e-3, 3e-3)} for a in ARCHS}
+    """Width and learning rate, and each architecture's own part (its record's ``grid``: the depths), for every
+    architecture the tables cover."""
+    return {a: {"hidden": (16, 32, 64), **architectures.architecture(a).grid, "lr": (1e-3, 3e-3)} for a in SMOKE}
 
 
 def preset_for(arch: str) -> Hyper:

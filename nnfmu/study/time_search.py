@@ -105,7 +105,8 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     """Spend ``minutes`` on the search (module docstring); the best trial's checkpoint is written to ``out``.
 
     ``dataset`` has its validation split; ``model_config`` is the base network (its ``arch`` is trial 0's and is
-    searched unless ``"arch"`` is in ``given``; None: a GRU on the linear path of ``linear``), ``train_config``
+    searched unless ``"arch"`` is in ``given``; None: the first architecture of the search order,
+:func:`~nnfmu.models.architectures.search_order`, on the linear path of ``linear``), ``train_config``
     the planned training (``max_minutes`` is not used: ``minutes`` is the budget; ``epochs`` at
     :data:`~nnfmu.limits.UNBOUNDED_EPOCHS` and ``patience`` 0 mean the plain training's budget per seed), ``linear``
     the linear model of the linear path (or None), ``given`` the names of the options the user gave (kept as given).
@@ -118,9 +119,9 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     if dataset.valid is None:
         raise ConfigError("the time search needs a dataset with its validation split (carve it first)")
     if model_config is None:
-        from nnfmu.models import ModelConfig
+        from nnfmu.models import ModelConfig, architectures
 
-        model_config = ModelConfig(arch="gru", n_u=dataset.n_u, n_y=dataset.n_y,
+        model_config = ModelConfig(arch=architectures.search_order()[0], n_u=dataset.n_u, n_y=dataset.n_y,
                                    linear_order=0 if linear is None else linear.n_x)
     if not (isinstance(minutes, (int, float)) and minutes > 0):
         raise ConfigError(f"the search budget must be > 0 minutes, got {minutes!r}")

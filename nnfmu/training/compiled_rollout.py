@@ -5,7 +5,7 @@ torch each step is 15-20 small operations (a TCN's, a few dozen) and as many aut
 sizes used here their fixed cost of a few microseconds each, not arithmetic, bounds
 the throughput (docs/scaling.md has the measurements). ``rollout.c`` runs the whole
 free run of a recurrent network in one call and back-propagation through time in another, with the same
-operations as :meth:`~nnfmu.models.recurrent.RecurrentStepModel._free_run_norm`; ``window_rollout.c``
+operations as :meth:`~nnfmu.networks.recurrent.model.RecurrentStepModel.free_run_norm`; ``window_rollout.c``
 (:mod:`nnfmu.training.compiled_window`) does the same for the window networks' step (the TCN's dilated layers
 over their delay lines, the MLP's layers over its window)::
 
@@ -14,10 +14,9 @@ over their delay lines, the MLP's layers over its window)::
     loss(ys).backward()                      # gradients of every weight (and of yn0)
 
 It applies to a model whose architecture's record names the compiled cell that computes its step
-(``Architecture.rollout_cell``: ``rnn``, ``lstm``, ``gru`` in ``rollout.c``, ``tcn``, ``mlp`` in
-``window_rollout.c``) and that is exactly the record's model class (the layout of
-:class:`~nnfmu.models.RecurrentStepModel`, :class:`~nnfmu.models.tcn.TCNStepModel` or
-:class:`~nnfmu.models.mlp.MLPStepModel`), and to a
+(``Architecture.rollout_cell``, a :class:`~nnfmu.training.rollout_cells.CompiledCell` of ``rollout.c`` or
+``window_rollout.c``, e.g. :mod:`nnfmu.networks.recurrent.rollout`) and that is exactly the record's model class
+(the layout the cell describes), and to a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` whose network is one (the path's linear
 state runs in C too; its initial state ``z0`` is computed by torch and back-propagated through), on
 the CPU in float32 or float64, with no active dropout (eval mode, or zero), no init window and no increment mode.
@@ -40,11 +39,10 @@ import torch
 from nnfmu.models import architectures
 from nnfmu.models.base import StepModel
 from nnfmu.models.linear_path import LinearPathStepModel
-from nnfmu.training import compiled_window
+from nnfmu.training import compiled_window, rollout_cells
 from nnfmu.training.rollout_library import (FIXED, REALS, backward_buffers, check, feedback_noise,
                                             library_or_none, path_arguments, pointers, ptr, run)
 
-_CELLS = {"rnn_tanh": 0, "rnn_relu": 1, "lstm": 2, "gru": 3}  # rollout.c's cells; an 'rnn' by its activation
 ENV_SWITCH = "NNFMU_COMPILED_ROLLOUT"
 
 
@@ -60,11 +58,11 @@ def compiled_rollout(model: StepModel):
     if not _applies(model):
         return None
     net = model.net if type(model) is LinearPathStepModel else model
-    window = architectures.architecture(net.config.arch).rollout_cell in compiled_window.KINDS
-    library = library_or_none(model.u_mean.dtype, "window_rollout" if window else "rollout")
+    cell = rollout_cells.compiled_cell(net)
+    library = library_or_none(model.u_mean.dtype, cell.library)
     if library is None:
         return None
-    if window:
+    if cell.library == rollout_cells.WINDOW:
         return functools.partial(compiled_window.apply, model, library)
     return functools.partial(_apply, model, library)
 
@@ -112,15 +110,11 @@ def _applies(model: StepModel) -> bool:
 
 
 def _cell(model: StepModel) -> int:
-    cell = architectures.architecture(model.config.arch).rollout_cell
-    return _CELLS[f"rnn_{model.config.activation}" if cell == "rnn" else cell]
+    return rollout_cells.compiled_cell(model).code
 
 
 def _weights(model: StepModel) -> list[torch.Tensor]:
-    out = []
-    for m in model.rnn_layers:
-        out += [m.weight_ih_l0, m.weight_hh_l0, m.bias_ih_l0, m.bias_hh_l0]
-    return out + [model.readout.weight, model.readout.bias]
+    return list(rollout_cells.compiled_cell(model).weights)
 
 
 def _apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
@@ -151,7 +145,7 @@ class _Rollout(torch.autograd.Function):
         noise = feedback_noise(noise_std, yn0, T)
         shape = (T, c.layers, B, c.hidden)
         hs = un_t.new_empty(shape) if keep else None
-        cs = un_t.new_empty(shape) if keep and _cell(model) == _CELLS["lstm"] else None
+        cs = un_t.new_empty(shape) if keep and _cell(model) == rollout_cells.LSTM_CELL else None
         width = library.nnfmu_rollout_saved_width(_cell(model), c.hidden)
         saved = un_t.new_empty(max(T - 1, 0), c.layers, B, width) if keep else None
         ns = un_t.new_empty(max(T - 1, 0), B, c.n_y) if keep and fixed is not None else None

@@ -1,7 +1,8 @@
 """The window networks' free run (TCN, MLP) as compiled C (``window_rollout.c``), for ``compiled_rollout``.
 
 Same contract as the recurrent networks' (``rollout(un, yn0) -> ys``, back-propagated by torch's autograd): a
-:class:`~nnfmu.models.tcn.TCNStepModel` or :class:`~nnfmu.models.mlp.MLPStepModel`, or a
+:class:`~nnfmu.networks.tcn.model.TCNStepModel` or :class:`~nnfmu.networks.mlp.model.MLPStepModel` (a network
+whose record's cell is one of ``window_rollout.c``, :mod:`nnfmu.training.rollout_cells`), or a
 :class:`~nnfmu.models.linear_path.LinearPathStepModel` on one, in eval mode or with no active dropout, with or
 without feedback noise (drawn as torch's loop draws it), without an init window or increment mode (the conditions
 :func:`nnfmu.training.compiled_rollout.compiled_rollout` checks). In torch a step of the TCN is a few dozen small
@@ -16,10 +17,10 @@ import ctypes
 import torch
 
 from nnfmu.models.base import StepModel
+from nnfmu.training.rollout_cells import compiled_cell
 from nnfmu.training.rollout_library import backward_buffers, check, feedback_noise, path_arguments, pointers, ptr, run
 
 ACTIVATIONS = {"tanh": 0, "relu": 1, "sigmoid": 2, "elu": 3, "silu": 4}  # window_rollout.c's codes
-KINDS = {"tcn": 0, "mlp": 1}
 
 
 def apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
@@ -30,17 +31,12 @@ def apply(model: StepModel, library: ctypes.CDLL, un: torch.Tensor, yn0: torch.T
 
 def _weights(model: StepModel) -> list[torch.Tensor]:
     """Per layer its weight and bias, then the output layer's, in window_rollout.c's order."""
-    if model.config.arch == "tcn":
-        layers = [*model.convs, model.head]
-    else:  # the MLP's Linear modules; the last is its output layer
-        layers = [m for m in model.net if isinstance(m, torch.nn.Linear)]
-    return [t for layer in layers for t in (layer.weight, layer.bias)]
+    return list(compiled_cell(model).weights)
 
 
 def _header(model: StepModel, B: int, T: int) -> tuple:
-    c = model.config
-    taps = c.kernel_size if c.arch == "tcn" else c.window
-    return (KINDS[c.arch], B, T, c.n_u, c.n_y, c.hidden, c.layers, taps, ACTIVATIONS[c.activation], int(c.skip),
+    c, cell = model.config, compiled_cell(model)
+    return (cell.code, B, T, c.n_u, c.n_y, c.hidden, c.layers, cell.taps, ACTIVATIONS[c.activation], int(c.skip),
             float(c.skip_scale))
 
 

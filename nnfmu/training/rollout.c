@@ -1,7 +1,7 @@
 /* Free run of a recurrent step network with output feedback, forward and back-propagation through time.
  *
  * nnfmu/training/compiled_rollout.py compiles this file once per machine (REAL = float and double) and
- * calls it from torch. It computes exactly what RecurrentStepModel._free_run_norm computes with
+ * calls it from torch. It computes exactly what RecurrentStepModel.free_run_norm computes with
  * torch.rnn_tanh_cell / rnn_relu_cell / lstm_cell / gru_cell, a linear readout and the optional skip
  * connection, for L stacked layers, without dropout:
  *

@@ -1,4 +1,4 @@
-"""The one trainer for both strategies: :func:`train` (alias :func:`fit`).
+"""The one trainer for both strategies: :func:`train`.
 
 A 20-line picture of what it does::
 
@@ -266,8 +266,6 @@ def train(
     return TrainResult(model, session.history, session.best_epoch, session.best_score, test, stop_reason,
                        out, session.elapsed, notes, test_window)
 
-
-fit = train
 
 
 def _test_scores(model: StepModel, dataset: Dataset) -> tuple[NrmseResult | None, NrmseResult | None]:

@@ -1,8 +1,8 @@
 /* Free run of a window network (TCN or MLP) with output feedback, forward and back-propagation through time.
  *
  * nnfmu/training/compiled_rollout.py compiles this file once per machine (REAL = float and double) and
- * calls it from torch. It computes exactly what the free run of TCNStepModel (nnfmu/models/tcn.py, its step in
- * nnfmu/models/tcn_state.py) or MLPStepModel (nnfmu/models/mlp.py, window.py) computes, for L layers of width
+ * calls it from torch. It computes exactly what the free run of TCNStepModel (nnfmu/networks/tcn/model.py, its step in
+ * nnfmu/networks/tcn/state.py) or MLPStepModel (nnfmu/networks/mlp/model.py, models/window.py) computes, for L layers of width
  * H, without dropout or increment mode. Layer i reads K_i taps of its input, d_i steps apart:
  *
  *     s_k   = [y_k + e_k, u_k]                       the newest sample: y_k fed back, e_k the feedback noise
@@ -15,7 +15,7 @@
  * residual; W_0[j] = the columns of sample j in the first Linear's weight (the window is flattened oldest
  * sample first, each sample's channels together).
  *
- * Before k = 0 the model is at rest (tcn_state.init, WindowStepModel._init_norm): every past sample is
+ * Before k = 0 the model is at rest (tcn_state.init, WindowStepModel.init_norm): every past sample is
  * r = [y_0, u_0], without noise, and every TCN delay line holds the column r^i its layer computes over that
  * constant input, r^0 = act(b_0 + sum_j W_0[j] r), r^i = r^{i-1} + act(b_i + sum_j W_i[j] r^{i-1}). A tap
  * before step 0 reads these (and back-propagates into them, and through them into the weights and y_0).

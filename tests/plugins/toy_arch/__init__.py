@@ -1,5 +1,5 @@
 """A toy architecture from outside nnfmu, registered through the public record only (docs/design.md,
-"How to add an architecture"); tests/test_architecture_plugin.py trains, exports and offers it.
+"Adding an architecture"); tests/test_architecture_plugin.py trains, exports and offers it.
 
 Load it with ``NNFMU_PLUGINS=toy_arch`` (this folder's parent on ``PYTHONPATH``), or install a package
 that declares it under the entry-point group ``nnfmu.architectures``. The record names its code lazily, so
@@ -18,4 +18,5 @@ register_architecture(Architecture(
     options=(Option(flag="--toy-leak", field="leak", type="float", metavar="A", bounds=(0, 1), open_bounds=(False, True),
                     help="the toy's leak: h+ = A h + (1 - A) tanh(...), 0 <= A < 1 (default 0)"),),
     preset={"hidden": 8},
+    search_rank=7,  # after the built-in networks in nnfmu train --max-minutes's search
 ))

@@ -16,7 +16,7 @@ def _linear(layer, v):
 
 
 def step(model, x, un):
-    """``(x_next, yn_next)`` of :meth:`ToyStepModel._step_norm` (``x``, ``un``: MX columns)."""
+    """``(x_next, yn_next)`` of :meth:`ToyStepModel.step_norm` (``x``, ``un``: MX columns)."""
     c = model.config
     yn, h = x[:c.n_y], x[c.n_y:]
     y_in = ca.DM.zeros(c.n_y, 1) if c.increment else yn

@@ -30,14 +30,7 @@ class ToyConfig(ModelConfig):
             raise ConfigError(f"the toy's leak must be in [0, 1), got {self.leak!r}")
         object.__setattr__(self, "leak", float(self.leak))
 
-    def _check_arch(self) -> None:
-        if self.arch != "toy":
-            raise ConfigError(f"ToyConfig has arch 'toy', got {self.arch!r}")
-
-    def _default_layers(self) -> int:
-        return 1
-
-    def _resolve_window(self) -> int:
+    def resolve_window(self) -> int:
         if self.window not in (None, 1):
             raise ShapeError(f"the toy sees one sample per step, so window must be 1, got {self.window}")
         return 1
@@ -50,21 +43,21 @@ class ToyStepModel(StepModel):
         super().__init__(config, meta)
         self.cell = nn.Linear(config.hidden + config.n_y + config.n_u, config.hidden)
         self.readout = nn.Linear(config.hidden, config.n_y)
-        self._check_sizes()
+        self.check_sizes()
 
     @property
     def n_x(self) -> int:
         return self.config.n_y + self.config.hidden
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn0, yn0.new_zeros(len(yn0), self.config.hidden)], dim=1)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         c = self.config
         yn, h = x[:, :c.n_y], x[:, c.n_y:]
-        h_next = c.leak * h + (1.0 - c.leak) * torch.tanh(self.cell(torch.cat([h, self._y_input(yn), un], dim=1)))
-        yn_next = self._skip(yn, self.readout(h_next))
+        h_next = c.leak * h + (1.0 - c.leak) * torch.tanh(self.cell(torch.cat([h, self.y_input(yn), un], dim=1)))
+        yn_next = self.apply_skip(yn, self.readout(h_next))
         return torch.cat([yn_next, h_next], dim=1), yn_next
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)

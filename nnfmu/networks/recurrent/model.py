@@ -31,18 +31,19 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from nnfmu.errors import ConfigError
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import RECURRENT_ARCHS, ModelConfig
 from nnfmu.models.encoder import encoder_input, make_encoder
+from nnfmu.networks.recurrent.config import RecurrentConfig
 
 
 class RecurrentStepModel(StepModel):
     """RNN / LSTM / GRU with output feedback; ``config.arch`` picks the cell."""
 
-    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+    def __init__(self, config: RecurrentConfig, meta: Mapping | None = None):
+        if not isinstance(config, RecurrentConfig):
+            raise ConfigError(f"RecurrentStepModel needs a RecurrentConfig, got {type(config).__name__}")
         super().__init__(config, meta)
-        if config.arch not in RECURRENT_ARCHS:
-            raise ValueError(f"RecurrentStepModel needs arch in {RECURRENT_ARCHS}, got {config.arch!r}")
         self.rnn_layers = nn.ModuleList(
             _make_layer(config, config.n_in if i == 0 else config.hidden) for i in range(config.layers)
         )
@@ -50,7 +51,7 @@ class RecurrentStepModel(StepModel):
         self.readout = nn.Linear(config.hidden, config.n_y)
         if config.init_window > 1:
             self.encoder = make_encoder(config, self.n_x - config.n_y)
-        self._check_sizes()
+        self.check_sizes()
 
     @property
     def is_lstm(self) -> bool:
@@ -86,10 +87,10 @@ class RecurrentStepModel(StepModel):
         return cell, layers, (self.readout.weight, self.readout.bias)
 
     def _cell_step(self, yn, un, hs: list, cs: list, weights: tuple) -> tuple[torch.Tensor, list, list]:
-        """One step on unpacked states; shared by :meth:`_step_norm` and the free run."""
+        """One step on unpacked states; shared by :meth:`step_norm` and the free run."""
         cell, layers, readout = weights
         drop = self.training and self.config.dropout > 0
-        inp = torch.cat([self._y_input(yn), un], dim=1)
+        inp = torch.cat([self.y_input(yn), un], dim=1)
         new_h, new_c = [], []
         for i, w in enumerate(layers):
             if self.is_lstm:
@@ -99,31 +100,31 @@ class RecurrentStepModel(StepModel):
                 h = cell(inp, hs[i], *w)
             new_h.append(h)
             inp = F.dropout(h, self.config.dropout) if drop else h
-        return self._skip(yn, F.linear(inp, *readout)), new_h, new_c
+        return self.apply_skip(yn, F.linear(inp, *readout)), new_h, new_c
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         zeros = yn0.new_zeros(yn0.shape[0], self.n_x - self.config.n_y)
         return torch.cat([yn0, zeros], dim=1)
 
-    def _init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
         if self.config.init_window == 1:
-            return self._init_norm(yn_win[:, -1], un_win[:, -1])
+            return self.init_norm(yn_win[:, -1], un_win[:, -1])
         hidden = self.encoder(encoder_input(yn_win, un_win, self.config.increment))
         return torch.cat([yn_win[:, -1], hidden], dim=1)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         yn, hs, cs = self._split(x)
         yn_next, hs, cs = self._cell_step(yn, un, hs, cs, self._weights())
         return self._pack(yn_next, hs, cs), yn_next
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
-        """Free run without packing the state each step (same operations as :meth:`_step_norm`); ``output`` as in
-        :meth:`StepModel._free_run_norm`."""
-        _, hs, cs = self._split(self._init_norm(yn0, un[:, 0]) if x0 is None else x0)
+        """Free run without packing the state each step (same operations as :meth:`step_norm`); ``output`` as in
+        :meth:`StepModel.free_run_norm`."""
+        _, hs, cs = self._split(self.init_norm(yn0, un[:, 0]) if x0 is None else x0)
         yn, ys, weights = yn0, [yn0], self._weights()
         noisy_increments = bool(self.feedback_noise and self.training and self.config.increment)
         for un_k in un[:, :-1].unbind(1):
@@ -134,20 +135,20 @@ class RecurrentStepModel(StepModel):
             ys.append(yn)
         return torch.stack(ys, dim=1)
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+    def teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
                              x0: torch.Tensor | None = None) -> torch.Tensor:
         """Fused: each layer runs over the whole sequence in one ``nn.GRU``/... call."""
         feed = yn_meas[:, :-1]
-        inp = torch.cat([self._y_input(feed), un[:, :-1]], dim=2)
+        inp = torch.cat([self.y_input(feed), un[:, :-1]], dim=2)
         _, hs, cs = self._split(x0) if x0 is not None else (None, [None] * self.config.layers, [])
         for i, layer in enumerate(self.rnn_layers):
             h0 = None if hs[i] is None else (hs[i][None], cs[i][None]) if self.is_lstm else hs[i][None]
             inp, _ = layer(inp, h0)  # None: the zero initial hidden state that init() sets
             inp = self.dropout(inp)
-        return self._skip(feed, self.readout(inp))
+        return self.apply_skip(feed, self.readout(inp))
 
 
-def _make_layer(config: ModelConfig, n_in: int) -> nn.Module:
+def _make_layer(config: RecurrentConfig, n_in: int) -> nn.Module:
     common = dict(input_size=n_in, hidden_size=config.hidden, num_layers=1, batch_first=True)
     if config.arch == "lstm":
         return nn.LSTM(**common)

@@ -6,7 +6,7 @@ before ``t``, oldest first: a ring buffer of the layer's own past input, which a
 step rotates by one column (drop the oldest, append the new one). So a step
 costs one convolution column per layer, ``O(layers * hidden * k * hidden)``,
 instead of recomputing every layer over the whole receptive field. It computes
-the same sums as the windowed form in :mod:`nnfmu.models.tcn`, so it predicts
+the same sums as the windowed form in :mod:`nnfmu.networks.tcn.model`, so it predicts
 the same outputs. Flat layout, in normalised units (what the FMU carries)::
 
     x = [ y_k (n_y) | line_0 | line_1 | ... | line_{layers-1} ]
@@ -24,20 +24,20 @@ from __future__ import annotations
 import torch
 from torch.nn import functional as F
 
-from nnfmu.models.config import ModelConfig
+from nnfmu.networks.tcn.config import TCNConfig
 
 
-def line_shapes(config: ModelConfig) -> list[tuple[int, int]]:
+def line_shapes(config: TCNConfig) -> list[tuple[int, int]]:
     """``(columns, channels)`` of each layer's delay line."""
     k = config.kernel_size
     return [((k - 1) * 2 ** i, config.n_in if i == 0 else config.hidden) for i in range(config.layers)]
 
 
-def state_size(config: ModelConfig) -> int:
+def state_size(config: TCNConfig) -> int:
     return config.n_y + sum(n * c for n, c in line_shapes(config))
 
 
-def split(config: ModelConfig, x: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+def split(config: TCNConfig, x: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
     """``x`` (B, n_x) -> ``y_k`` (B, n_y) and the delay lines, each (B, columns, channels)."""
     sizes = [config.n_y] + [n * c for n, c in line_shapes(config)]
     yn, *flat = torch.split(x, sizes, dim=1)
@@ -71,7 +71,7 @@ def step(model, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.
         out = column(model, i, seq[:, ::2 ** i])
         new_lines.append(seq[:, 1:].reshape(len(x), -1))
         h = out if i == 0 else h + out
-    yn_next = model._skip(yn, model.head(h))
+    yn_next = model.apply_skip(yn, model.head(h))
     return torch.cat([yn_next, *new_lines], dim=1), yn_next
 
 

@@ -1,4 +1,4 @@
-"""TCN step network: dilated causal convolutions over a window (step state: :mod:`nnfmu.models.tcn_state`).
+"""TCN step network: dilated causal convolutions over a window (step state: :mod:`nnfmu.networks.tcn.state`).
 
 Layer ``i`` (``i = 0 .. layers-1``) is an ``nn.Conv1d`` with kernel size ``k``
 and dilation ``2**i``, without padding ("valid"): each layer shortens the
@@ -19,7 +19,7 @@ for the tiny per-step windows this is several times faster than
 Teacher forcing evaluates these over the whole padded sequence in one call. The
 step (and so the free run, a loop over it, and the exported FMU) is incremental:
 each layer keeps a delay line of its past input columns in the state and
-computes one new column per step (:mod:`nnfmu.models.tcn_state`), the same sums.
+computes one new column per step (:mod:`nnfmu.networks.tcn.state`), the same sums.
 """
 
 from __future__ import annotations
@@ -30,11 +30,12 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from nnfmu.models import tcn_state
+from nnfmu.errors import ConfigError
+from nnfmu.models.activation import activation_module
 from nnfmu.models.base import StepModel
-from nnfmu.models.config import ModelConfig
-from nnfmu.models.mlp import activation_module
 from nnfmu.models.window import WindowStepModel
+from nnfmu.networks.tcn import state as tcn_state
+from nnfmu.networks.tcn.config import TCNConfig
 
 
 class TCNStepModel(WindowStepModel):
@@ -42,10 +43,10 @@ class TCNStepModel(WindowStepModel):
 
     relative_window = False  # increment mode acts in the first layer, per column (:meth:`_conv`)
 
-    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+    def __init__(self, config: TCNConfig, meta: Mapping | None = None):
+        if not isinstance(config, TCNConfig):
+            raise ConfigError(f"TCNStepModel needs a TCNConfig, got {type(config).__name__}")
         super().__init__(config, meta)
-        if config.arch != "tcn":
-            raise ValueError(f"TCNStepModel needs arch 'tcn', got {config.arch!r}")
         self.convs = nn.ModuleList(
             nn.Conv1d(config.n_in if i == 0 else config.hidden, config.hidden, config.kernel_size, dilation=2 ** i)
             for i in range(config.layers)
@@ -53,7 +54,7 @@ class TCNStepModel(WindowStepModel):
         self.activation = activation_module(config.activation)
         self.dropout = nn.Dropout(config.dropout)
         self.head = nn.Linear(config.hidden, config.n_y)
-        self._check_sizes()
+        self.check_sizes()
 
     def _conv(self, i: int, h: torch.Tensor) -> torch.Tensor:
         """Valid dilated convolution of layer ``i`` over ``h`` (B, T_in, C) channels last -> (B, T_in - (k-1)d, H).
@@ -83,29 +84,29 @@ class TCNStepModel(WindowStepModel):
     def _predict_windows(self, window: torch.Tensor) -> torch.Tensor:
         return self.head(self._features(window)[:, -1])
 
-    # ---- the incremental step (state layout: nnfmu.models.tcn_state) -------------------------
+    # ---- the incremental step (state layout: nnfmu.networks.tcn.state) -------------------------
     @property
     def n_x(self) -> int:
         return tcn_state.state_size(self.config)
 
-    def _init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
+    def init_norm(self, yn0: torch.Tensor, un0: torch.Tensor) -> torch.Tensor:
         return tcn_state.init(self, yn0, un0)
 
-    def _step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def step_norm(self, x: torch.Tensor, un: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return tcn_state.step(self, x, un)
 
-    def _inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
+    def inject_y(self, x: torch.Tensor, yn: torch.Tensor) -> torch.Tensor:
         return torch.cat([yn, x[:, self.config.n_y:]], dim=1)
 
-    def _free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None,
                        output=None) -> torch.Tensor:
-        return StepModel._free_run_norm(self, un, yn0, x0, output)  # the loop over the incremental step
+        return StepModel.free_run_norm(self, un, yn0, x0, output)  # the loop over the incremental step
 
-    def _teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
+    def teacher_forced_norm(self, un: torch.Tensor, yn_meas: torch.Tensor,
                              x0: torch.Tensor | None = None) -> torch.Tensor:
         if x0 is not None:  # an init window's delay lines, not samples to pad the sequence with
-            return StepModel._teacher_forced_norm(self, un, yn_meas, x0)
-        return super()._teacher_forced_norm(un, yn_meas)
+            return StepModel.teacher_forced_norm(self, un, yn_meas, x0)
+        return super().teacher_forced_norm(un, yn_meas)
 
     def state_from_window(self, yn_window: torch.Tensor, un_window: torch.Tensor) -> torch.Tensor:
         self._check_window(yn_window, un_window)

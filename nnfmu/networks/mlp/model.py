@@ -1,4 +1,5 @@
-"""MLP step network over a window of the last ``L`` samples (state layout: :mod:`nnfmu.models.window`).
+"""MLP step network over a window of the last ``L`` samples (state layout: :mod:`nnfmu.models.window`; config:
+:class:`~nnfmu.networks.mlp.config.MLPConfig`).
 
 ::
 
@@ -18,24 +19,19 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from nnfmu.models.config import ModelConfig
+from nnfmu.errors import ConfigError
+from nnfmu.models.activation import activation_module
 from nnfmu.models.window import WindowStepModel
-
-ACTIVATION_MODULES = {"tanh": nn.Tanh, "relu": nn.ReLU, "sigmoid": nn.Sigmoid, "elu": nn.ELU, "silu": nn.SiLU}
-
-
-def activation_module(name: str) -> nn.Module:
-    """A fresh module of the named activation (the names of :data:`nnfmu.models.config.ACTIVATIONS`)."""
-    return ACTIVATION_MODULES[name]()
+from nnfmu.networks.mlp.config import MLPConfig
 
 
 class MLPStepModel(WindowStepModel):
     """Multilayer perceptron on the flattened window ``(L * (n_y + n_u),)``."""
 
-    def __init__(self, config: ModelConfig, meta: Mapping | None = None):
+    def __init__(self, config: MLPConfig, meta: Mapping | None = None):
+        if not isinstance(config, MLPConfig):
+            raise ConfigError(f"MLPStepModel needs an MLPConfig, got {type(config).__name__}")
         super().__init__(config, meta)
-        if config.arch != "mlp":
-            raise ValueError(f"MLPStepModel needs arch 'mlp', got {config.arch!r}")
         modules: list[nn.Module] = []
         n_in = config.window * config.n_in
         for _ in range(config.layers):
@@ -44,7 +40,7 @@ class MLPStepModel(WindowStepModel):
             n_in = config.hidden
         modules.append(nn.Linear(n_in, config.n_y))
         self.net = nn.Sequential(*modules)
-        self._check_sizes()
+        self.check_sizes()
 
     def _net(self, v: torch.Tensor) -> torch.Tensor:
         """``self.net(v)`` without the per-module call overhead where it is safe (the rollout's hot loop)."""
