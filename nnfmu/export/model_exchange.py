@@ -108,6 +108,19 @@ def _structural(fn: ca.Function, out: int, ins: dict[int, str]) -> list[tuple[tu
             for row in range(fn.size1_out(out))]
 
 
+def _window_structure(fn: ca.Function, out: int, first: int, spec) -> list[tuple[tuple[str, int], ...]]:
+    """Per row of output ``out``: the init-window parameters it depends on, as ``("past", c (N - 1) + j)`` (channel
+    ``c``, outputs then inputs; sample ``j``: the FMI 2 scalar's index; the FMI 3 array's is ``c``)."""
+    n_past = spec.init_window - 1
+    rows = []
+    for i, width in ((first, spec.n_y), (first + 1, spec.n_u)):
+        block = ca.DM(fn.jac_sparsity(out, i), 1).full() != 0  # columns sample by sample: k = j width + c
+        offset = 0 if i == first else spec.n_y
+        rows.append([tuple(("past", (offset + k % width) * n_past + k // width) for k in np.flatnonzero(row))
+                     for row in block])
+    return [a + b for a, b in zip(*rows)]
+
+
 def continuous_structure(model: CasadiModel) -> ContinuousStructure:
     """States, nominals and the dependencies of outputs, derivatives and initial unknowns (CasADi sparsity)."""
     dynamics, spec = model.continuous, model.spec
@@ -115,12 +128,15 @@ def continuous_structure(model: CasadiModel) -> ContinuousStructure:
     has_p = spec.n_p > 0
     sym, init_args = _symbols(model.init)
     x0 = model.init(*init_args)
-    outputs = me(x0, init_args[1], *init_args[2:])
+    outputs = me(x0, init_args[1], *init_args[2:2 + has_p])
     initial_fn = ca.Function("initial", init_args, [outputs[1], x0, outputs[0]])
     knowns = {0: "output_start", 1: "input", **({2: "parameter"} if has_p else {})}
     initial = []
     for out, role in enumerate(("output", "state", "derivative")):
-        initial += [((role, i), deps) for i, deps in enumerate(_structural(initial_fn, out, knowns))]
+        deps = _structural(initial_fn, out, knowns)
+        if spec.init_window > 1:  # an init window: init's y_past, u_past are the parameters <c>_past
+            deps = [a + b for a, b in zip(deps, _window_structure(initial_fn, out, 2 + has_p, spec))]
+        initial += [((role, i), d) for i, d in enumerate(deps)]
     return ContinuousStructure(
         states=dynamics.states, nominals=dynamics.nominals,
         outputs=tuple(_structural(me, 1, {0: "state"})),
