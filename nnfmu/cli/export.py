@@ -20,6 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                            "by 'nnfmu fit' (.json)")
     parser.add_argument("-o", "--out", help="the .fmu file to write (default: the checkpoint's name with .fmu)")
     add_fmu_options(parser)
+    add_init_window_option(parser)
     parser.add_argument("--name", help="the FMU's model name and modelIdentifier (a C identifier; default: "
                                        "the name stored in the checkpoint)")
 
@@ -44,6 +45,15 @@ def add_fmu_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-model-exchange", action="store_true",
                         help="co-simulation only, also for a continuous-time model (physics, hybrid with a "
                              "derivative correction), which otherwise offers Model Exchange too")
+
+
+def add_init_window_option(parser: argparse.ArgumentParser) -> None:
+    """``--init-window N`` of a physics model, a grey-box fit or a hybrid: the start state estimated in the FMU."""
+    parser.add_argument("--init-window", dest="init_window", type=int, metavar="N",
+                        help="physics, fit or hybrid: the FMU estimates the whole initial state (unmeasured states "
+                             "too) from the N samples before the start, set as its <channel>_past parameters, by a "
+                             "least-squares fit of the model over them (default: a fit's own, else 1: the init "
+                             "rule from the first sample; docs/own-physics.md)")
 
 
 def check_fmu_options(args: argparse.Namespace) -> None:
@@ -91,16 +101,36 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
     return path
 
 
-def fitted_model(path: str, name: str | None = None):
-    """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model."""
+def fitted_model(path: str, name: str | None = None, init_window: int | None = None):
+    """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model.
+
+    ``init_window``: its estimator's window (default: the one the fit was scored with, else 1).
+    """
     import dataclasses
 
     from nnfmu.greybox import load_fit
+    from nnfmu.physics.initial_state import estimating_model
 
-    system, _ = load_fit(path)
+    system, report = load_fit(path)
     if name is not None:
         system = dataclasses.replace(system, name=name)
-    return system.model(expose_parameters=True)
+    window = init_window or int(report.get("init_window") or 1)
+    return estimating_model(system, expose_parameters=True, init_window=window, y_scale=report.get("output_scales"))
+
+
+def _with_init_window(model, network, window: int | None):
+    """A hybrid's CasADi model with the estimator of ``--init-window`` (errors between networks' windows are the
+    output's standard deviation in training, as the fit's)."""
+    from nnfmu.errors import ConfigError
+    from nnfmu.physics.initial_state import with_init_window
+
+    if not window or window == 1:
+        return model
+    if model.spec.source.get("kind") != "nnfmu-hybrid":
+        raise ConfigError(f"--init-window applies to physics, fits and hybrids; a network's init window is learned "
+                          f"in training (nnfmu train --init-window {window}); leave --init-window out of export")
+    return with_init_window(model, window, y_scale=network.y_std.detach().double().numpy(),
+                            x_scale=network.physics.state_scales or None)
 
 
 def export_checkpoint(args: argparse.Namespace) -> int:
@@ -120,12 +150,12 @@ def export_checkpoint(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.checkpoint).with_suffix(".fmu")
     check_writable(out)
     if Path(args.checkpoint).suffix.lower() == ".json":
-        write_fmu(fitted_model(args.checkpoint, args.name), out, args)
+        write_fmu(fitted_model(args.checkpoint, args.name, args.init_window), out, args)
         return 0
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 
-    model = casadi_model(network, name=args.name)
+    model = _with_init_window(casadi_model(network, name=args.name), network, args.init_window)
     write_fmu(model, out, args)
     return 0
 

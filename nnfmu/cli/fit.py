@@ -52,6 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compile", choices=["auto", "on", "off"], default="auto",
                    help="run the windows' free runs and sensitivities as compiled C: auto (default) for large "
                         "models (the ODE's instructions times the sub-steps from 20,000, as the arm), same values")
+    p.add_argument("--init-window", dest="init_window", type=int, default=1, metavar="N",
+                   help="score every split after an init window of N samples, from the state that the FMU's "
+                        "estimator fits to them (kept in the fit file, so 'nnfmu export' builds that FMU); "
+                        "default 1: from the first sample's init rule")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -128,7 +132,7 @@ def _run(args: argparse.Namespace) -> int:
                        start={n: _number(v, "--start", n) for n, v in _pairs(args.start, "--start")},
                        window=args.window, starts=args.starts, seed=args.seed, solver=args.solver,
                        max_evaluations=args.max_evaluations, n_sub=args.n_sub, max_windows=args.max_windows,
-                       compile=args.compile)
+                       compile=args.compile, init_window=args.init_window)
     out = Path(args.out)
     if out.suffix.lower() != ".json":  # a fit in g.pt would be taken for a checkpoint by export and info
         raise ConfigError(f"-o {out}: a fit is written as JSON; give a name ending in .json (e.g. -o "

@@ -34,7 +34,7 @@ import numpy as np
 from nnfmu.errors import ShapeError
 from nnfmu.system import CasadiModel
 
-__all__ = ["with_init_window", "window_estimator", "ITERATIONS"]
+__all__ = ["with_init_window", "window_estimator", "estimating_model", "ITERATIONS"]
 
 #: Levenberg-Marquardt steps unrolled into ``init``: on the two tanks, noise-free, 10 took the upper level to
 #: the true one within 1e-9 from the steady-state guess (tests/test_physics_init_window.py).
@@ -130,3 +130,12 @@ def with_init_window(model: CasadiModel, window: int, *, y_scale=None, x_scale=N
     estimator = {"method": "levenberg-marquardt", "iterations": iterations, "window": window}
     source = {**spec.source, "initial_state": estimator}
     return dataclasses.replace(model, init=init, spec=dataclasses.replace(spec, init_window=window, source=source))
+
+
+def estimating_model(system, *, n_sub: int | None = None, expose_parameters: bool = True, init_window: int = 1,
+                     y_scale=None, iterations: int = ITERATIONS) -> CasadiModel:
+    """``system.model(...)`` (a :class:`~nnfmu.physics.PhysicsSystem`) with an init window of ``init_window``
+    samples whose ``init`` estimates the state (:func:`with_init_window`; ``x_scale``: the states' scales)."""
+    model = system.model(n_sub=n_sub, expose_parameters=expose_parameters)
+    return with_init_window(model, init_window, y_scale=y_scale, x_scale=system.state_scales or None,
+                            iterations=iterations)
