@@ -121,3 +121,27 @@ def test_with_init_window_checks_its_arguments(tanks):
         with_init_window(with_init_window(model, 5), 5)
     with pytest.raises(ShapeError, match="positive numbers"):
         with_init_window(model, 5, y_scale=[0.0])
+
+
+class _ArraysMe(MeInstance):
+    """FMI 3 Model Exchange whose start values may be arrays (their values follow the references in order)."""
+
+    def set(self, values: dict) -> None:
+        self.fmu.setFloat64([self.vr[k] for k in values], [float(v) for a in values.values() for v in np.ravel(a)])
+
+
+def test_fmi3_arrays_and_model_exchange_take_the_window(tanks, record, tmp_path):
+    """FMI 3: one array ``<c>_past`` per channel; the FMU validates (its ModelStructure names the window)."""
+    from fmpy.validation import validate_fmu
+
+    u, x, y = record
+    model = with_init_window(tanks.model(), WINDOW, x_scale=tanks.state_scales)
+    path = build_fmu(model, tmp_path / "tanks3.fmu", fmi_version=3)
+    assert validate_fmu(str(path)) == []
+    y_past, u_past = _window(u, y)
+    me = _ArraysMe(path, {"h2_start": y[START, 0], "h2_past": y_past[:, 0], "u_past": u_past[:, 0]})
+    x0 = model.init(y[START], u[START], tanks.parameter_values(), y_past.ravel(), u_past.ravel())
+    np.testing.assert_allclose(me.states_now(), np.asarray(x0).ravel(), rtol=1e-12, atol=0)
+    with FmuSimulator(path, ["u"], ["h2"], tanks.Ts) as sim:
+        got = sim.simulate(u[START:], y[START], y_past, u_past)
+    np.testing.assert_allclose(got, y[START:], rtol=1e-6, atol=0)

@@ -142,6 +142,9 @@ def _run(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.data)
     print(f"fit: {system.name} on {args.data} by {args.solver}, {args.starts} start(s)", flush=True)
     fit = fit_greybox(system, dataset, config, progress=not args.quiet)
+    if config.init_window > 1:
+        print(f"scores after an init window of {config.init_window} samples, from the state the FMU's estimator "
+              "fits to them (as nnfmu evaluate --init-window scores its FMU)")
     print("\n".join(_summary(fit.system, fit.report)))
     print(f"wrote {save_fit(out, fit.system, {**fit.report, 'data': str(args.data)})}")
     return 0
