@@ -1,8 +1,8 @@
 """Issue 34, item 1: which estimator of the initial state goes into the FMU, measured.
 
 On data generated from a physics model (the two tanks of examples/two_tanks.py, the upper level not
-measured; the viscous slider of examples/slider_viscous.py, its velocity not measured), with and without measurement noise, the state at t0 is
-estimated from the init window of the N samples up to t0 by
+measured; the viscous slider of examples/slider_viscous.py, its velocity not measured), with and without
+measurement noise, the state at t0 is estimated from the init window of the N samples up to t0 by
 
 - ``rule``: the model's init rule from the sample at t0 alone (what the FMU did without a window);
 - ``lm K``: the unrolled Levenberg-Marquardt fit of the window's start state, K steps (the FMU's,

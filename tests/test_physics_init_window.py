@@ -19,7 +19,7 @@ from nnfmu.cosim import FmuSimulator, inspect_fmu
 from nnfmu.errors import ShapeError
 from nnfmu.export import build_fmu
 from nnfmu.physics import resolve_physics
-from nnfmu.physics.initial_state import window_estimator, with_init_window
+from nnfmu.physics.initial_state import compact_step, estimating_model, window_estimator, with_init_window
 from nnfmu.window_names import past_element
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "two_tanks.py"
@@ -45,7 +45,7 @@ def record(tanks):
 
 @pytest.fixture(scope="module")
 def fmu(tanks, tmp_path_factory):
-    model = with_init_window(tanks.model(), WINDOW, x_scale=tanks.state_scales)
+    model = estimating_model(tanks, init_window=WINDOW)
     return model, build_fmu(model, tmp_path_factory.mktemp("tanks") / "tanks_window.fmu")
 
 
@@ -78,8 +78,9 @@ def test_the_fmu_equals_the_casadi_estimator(tanks, record, fmu):
     p = tanks.parameter_values()
     for k in (WINDOW - 1, START, 200):
         y_past, u_past = _window(u, y, k)
-        x_end, x_start, _ = window_estimator(tanks.model(), WINDOW, x_scale=tanks.state_scales)(
-            np.vstack([y_past, y[k:k + 1]]).T, u_past.T, p)
+        estimate = window_estimator(tanks.model(), WINDOW, x_scale=tanks.state_scales,
+                                    step=compact_step(tanks, tanks.n_sub, expose_parameters=True))
+        x_end, x_start, _ = estimate(np.vstack([y_past, y[k:k + 1]]).T, u_past.T, p)
         x0 = model.init(y[k], u[k], p, y_past.ravel(), u_past.ravel())
         np.testing.assert_array_equal(np.asarray(x0).ravel(), np.asarray(x_end).ravel())
         expected = model.simulate(u[k:], y[k], y_past=y_past, u_past=u_past)
@@ -112,6 +113,17 @@ def test_a_window_of_nan_or_huge_values_gives_a_finite_start_without_warnings(ta
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
 
 
+def test_the_compact_step_is_the_models_step(tanks, record):
+    u, x, _ = record
+    p = tanks.parameter_values()
+    for expose in (True, False):
+        step, compact = tanks.model(expose_parameters=expose).step, compact_step(tanks, 2, expose_parameters=expose)
+        for k in (0, 100, 250):
+            args = [x[k], u[k]] + [p] * expose
+            for a, b in zip(step(*args), compact(*args)):
+                np.testing.assert_allclose(np.asarray(b).ravel(), np.asarray(a).ravel(), rtol=1e-14, atol=0)
+
+
 def test_with_init_window_checks_its_arguments(tanks):
     model = tanks.model()
     assert with_init_window(model, 1) is model
@@ -135,7 +147,7 @@ def test_fmi3_arrays_and_model_exchange_take_the_window(tanks, record, tmp_path)
     from fmpy.validation import validate_fmu
 
     u, x, y = record
-    model = with_init_window(tanks.model(), WINDOW, x_scale=tanks.state_scales)
+    model = estimating_model(tanks, init_window=WINDOW)
     path = build_fmu(model, tmp_path / "tanks3.fmu", fmi_version=3)
     assert validate_fmu(str(path)) == []
     y_past, u_past = _window(u, y)
@@ -145,3 +157,15 @@ def test_fmi3_arrays_and_model_exchange_take_the_window(tanks, record, tmp_path)
     with FmuSimulator(path, ["u"], ["h2"], tanks.Ts) as sim:
         got = sim.simulate(u[START:], y[START], y_past, u_past)
     np.testing.assert_allclose(got, y[START:], rtol=1e-6, atol=0)
+
+
+def test_an_infinite_window_value_is_the_networks_error(tanks, record, fmu):
+    """As a network's init window: an infinite sample is an error at initialisation that names it."""
+    u, x, y = record
+    _, path = fmu
+    y_past, u_past = _window(u, y)
+    bad = y_past.copy()
+    bad[2, 0] = np.inf
+    with FmuSimulator(path, ["u"], ["h2"], tanks.Ts) as sim:
+        with pytest.raises(Exception, match="sample 3 .* h2_past is inf"):
+            sim.simulate(u[START:], y[START], bad, u_past)
