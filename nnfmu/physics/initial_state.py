@@ -32,6 +32,7 @@ import casadi as ca
 import numpy as np
 
 from nnfmu.errors import ShapeError
+from nnfmu.limits import MAX_INIT_WINDOW
 from nnfmu.physics.rk4 import rk4_step
 from nnfmu.system import CasadiModel
 
@@ -113,8 +114,9 @@ def with_init_window(model: CasadiModel, window: int, *, y_scale=None, x_scale=N
     ``x_scale``, ``iterations``, ``step``: as in :func:`window_estimator`. The FMU takes the window as its
     ``<channel>_past`` parameters (:mod:`nnfmu.window_names`), as a network's init window.
     """
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
-        raise ShapeError(f"init window must be a whole number of samples >= 1, got {window!r}")
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or not 1 <= window <= MAX_INIT_WINDOW:
+        raise ShapeError(f"init window must be a whole number of samples from 1 to {MAX_INIT_WINDOW:,} "
+                         f"(nnfmu.limits.MAX_INIT_WINDOW), got {window!r}")
     if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
         raise ShapeError(f"iterations must be a whole number >= 0, got {iterations!r}")
     if model.spec.init_window != 1:
