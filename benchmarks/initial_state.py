@@ -28,13 +28,20 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from nnfmu.physics import generate_model_dataset, resolve_physics
+from nnfmu.physics import generate_model_dataset, resolve_physics, rk4_function
 from nnfmu.physics.initial_state import estimating_model
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 MODELS = {"two_tanks": f"{EXAMPLES / 'two_tanks.py'}:two_tanks",
           "slider": f"{EXAMPLES / 'slider_viscous.py'}:slider_viscous"}
 HORIZON, EVERY = 200, 40
+
+
+def simulate_states(system, x0, u) -> np.ndarray:
+    """States of the RK4 free run from ``x0`` (n_x,) under ``u`` (n, n_u): (n + 1, n_x)."""
+    step = rk4_function(system.ode, Ts=system.Ts, n_sub=system.n_sub)
+    p = np.repeat(system.parameter_values()[:, None], len(u), axis=1)
+    return np.vstack([np.asarray(x0, float)[None], np.asarray(step.mapaccum("sim", len(u))(x0, u.T, p)).T])
 
 
 def ekf_function(system):
@@ -70,8 +77,8 @@ def run_ekf(system, ekf, y_win, u_win, p, noise, y_std):
 def cases(system, clean, noisy, window):
     """(u, y_noisy, y_clean, x_true, k) at every EVERY-th t0 of the test records."""
     for u, y, y0 in zip(noisy.test.u, noisy.test.y, clean.test.y):
-        x = system.simulate_states(np.asarray(system.init_state(y0[0], u[0], system.parameter_values())).ravel(),
-                                   u[:-1])
+        x = simulate_states(system, np.asarray(system.init_state(y0[0], u[0], system.parameter_values())).ravel(),
+                            u[:-1])
         for k in range(window - 1, len(u) - HORIZON, EVERY):
             yield u, y, y0, x, k
 
@@ -88,7 +95,7 @@ def measure(name, window, noise, iterations):
     rows = {}
 
     def record(method, x_hat, x_true, u, y_clean, k, seconds):
-        sim = system.simulate_states(x_hat, u[k:k + HORIZON - 1])
+        sim = simulate_states(system, x_hat, u[k:k + HORIZON - 1])
         y_hat = np.vstack([np.asarray(system.output(s, p)).ravel() for s in sim])
         err = np.sqrt(np.mean(((y_hat - y_clean[k:k + HORIZON]) / y_std) ** 2))
         rows.setdefault(method, []).append((np.abs(x_hat - x_true[k]) / scale, err, seconds))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from physics_sim import simulate_states
 from test_fmu_model_exchange import MeInstance
 
 from nnfmu.cosim import FmuSimulator, inspect_fmu
@@ -38,7 +39,7 @@ def record(tanks):
     u = np.clip(5 + 3 * np.repeat(rng.standard_normal(15), 20), 0, 10)[:, None]
     p = tanks.parameter_values()
     rest = np.asarray(tanks.init_state(0.08, u[0], p)).ravel()
-    x = tanks.simulate_states([1.4 * rest[0], 0.08], u[:-1])
+    x = simulate_states(tanks, [1.4 * rest[0], 0.08], u[:-1])
     y = np.vstack([np.asarray(tanks.output(xk, p)).ravel() for xk in x])
     return u, x, y
 

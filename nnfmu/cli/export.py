@@ -119,8 +119,8 @@ def fitted_model(path: str, name: str | None = None, init_window: int | None = N
 
 
 def _with_init_window(model, network, window: int | None):
-    """A hybrid's CasADi model with the estimator of ``--init-window`` (errors between networks' windows are the
-    output's standard deviation in training, as the fit's)."""
+    """A hybrid's CasADi model with the estimator of ``--init-window``: each output's error divided by its
+    standard deviation in training (the hybrid's normalisation), as the fit divides by the training split's."""
     from nnfmu.errors import ConfigError
     from nnfmu.physics.initial_state import with_init_window
 
