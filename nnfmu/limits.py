@@ -11,6 +11,8 @@ line checks sizes here first:
 - ``nnfmu linear --order/--max-order`` at most :data:`MAX_LINEAR_ORDER` states;
 - ``nnfmu physics-fmu --n-sub``, and a model file's ``n_sub``, at most :data:`MAX_RK4_SUBSTEPS` RK4
   sub-steps per sample;
+- the init window that a physics model, fit or hybrid estimates its state from (``physics-fmu``, ``export``,
+  ``fit --init-window``) at most :data:`MAX_INIT_WINDOW` samples: each is a parameter per channel of the FMU;
 - a model name (``export --name``, a model file's name) at most :data:`MAX_MODEL_NAME` characters: it names the
   FMU's binary and source files, and file names end at 255 bytes.
 
@@ -27,6 +29,7 @@ MAX_BATCH_SIZE = 100_000
 MAX_LINEAR_ORDER = 200
 MAX_RK4_SUBSTEPS = 10_000
 MAX_MODEL_NAME = 128
+MAX_INIT_WINDOW = 100_000
 #: An epoch limit that no time budget reaches: ``TrainConfig(epochs=UNBOUNDED_EPOCHS, max_minutes=M)``
 #: trains until the wall-clock budget ends (``nnfmu train --max-minutes M`` alone), and its progress bar
 #: counts time instead of epochs.

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from nnfmu.errors import ConfigError
-from nnfmu.limits import MAX_BATCH_SIZE, MAX_LINEAR_ORDER, MAX_RK4_SUBSTEPS, UNBOUNDED_EPOCHS
+from nnfmu.limits import MAX_BATCH_SIZE, MAX_INIT_WINDOW, MAX_LINEAR_ORDER, MAX_RK4_SUBSTEPS, UNBOUNDED_EPOCHS
 
 #: ``--max-minutes`` at most a year: a larger budget is a typo (and 1e308 overflows every clock).
 MAX_MINUTES = 366 * 24 * 60.0
@@ -83,6 +83,9 @@ RULES: dict[str | tuple[str, str], Rule] = {
     "holdout": Rule(0, 1, hi_open=True, fix="e.g. 0.2, or 0 for the whole record"),
     # fit
     "starts": Rule(1, 1000, fix="each start is a whole fit; a few spread inside the bounds are usual"),
+    # the state estimated from an init window (physics, fits, hybrids)
+    **{(c, "init_window"): Rule(1, MAX_INIT_WINDOW, constant="nnfmu.limits.MAX_INIT_WINDOW")
+       for c in ("physics-fmu", "export", "fit")},
     # import
     "Ts": Rule(0, 366 * 86400.0, lo_open=True, fix="give the sample time in seconds"),
     "resample": Rule(1, 1_000_000), "valid_fraction": Rule(0, 1, lo_open=True, hi_open=True, fix="e.g. 0.2"),

@@ -20,6 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                            "by 'nnfmu fit' (.json)")
     parser.add_argument("-o", "--out", help="the .fmu file to write (default: the checkpoint's name with .fmu)")
     add_fmu_options(parser)
+    add_init_window_option(parser)
     parser.add_argument("--name", help="the FMU's model name and modelIdentifier (a C identifier; default: "
                                        "the .fmu file's name, so that two models of one dataset differ)")
 
@@ -44,6 +45,15 @@ def add_fmu_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-model-exchange", action="store_true",
                         help="co-simulation only, also for a continuous-time model (physics, hybrid with a "
                              "derivative correction), which otherwise offers Model Exchange too")
+
+
+def add_init_window_option(parser: argparse.ArgumentParser) -> None:
+    """``--init-window N`` of a physics model, a grey-box fit or a hybrid: the start state estimated in the FMU."""
+    parser.add_argument("--init-window", dest="init_window", type=int, metavar="N",
+                        help="physics, fit or hybrid: the FMU estimates the whole initial state (unmeasured states "
+                             "too) from the N samples before the start, set as its <channel>_past parameters, by a "
+                             "least-squares fit of the model over them (default: a fit's own, else 1: the init "
+                             "rule from the first sample; docs/own-physics.md)")
 
 
 def check_fmu_options(args: argparse.Namespace) -> None:
@@ -91,14 +101,17 @@ def write_fmu(model, out: Path, args: argparse.Namespace) -> Path:
     return path
 
 
-def fitted_model(path: str, name: str | None = None):
+def fitted_model(path: str, name: str | None = None, init_window: int | None = None):
     """The :class:`~nnfmu.system.CasadiModel` of a grey-box fit file, as ``nnfmu physics-fmu`` builds a model.
 
     A fit that stored its training data's input range (``report["input_range"]``) declares it as the inputs' valid
-    range, as a trained network's or a hybrid's FMU does (:mod:`nnfmu.valid_range`)."""
+    range, as a trained network's or a hybrid's FMU does (:mod:`nnfmu.valid_range`). ``init_window``: its
+    estimator's window (default: the one the fit was scored with, else 1).
+    """
     import dataclasses
 
     from nnfmu.greybox import load_fit
+    from nnfmu.physics.initial_state import estimating_model
     from nnfmu.valid_range import with_ranges
 
     system, report = load_fit(path)
@@ -109,7 +122,23 @@ def fitted_model(path: str, name: str | None = None):
         system = dataclasses.replace(system, inputs=with_ranges(system.inputs, ranges))
     if name is not None:
         system = dataclasses.replace(system, name=name)
-    return system.model(expose_parameters=True)
+    window = init_window or int(report.get("init_window") or 1)
+    return estimating_model(system, expose_parameters=True, init_window=window, y_scale=report.get("output_scales"))
+
+
+def _with_init_window(model, network, window: int | None):
+    """A hybrid's CasADi model with the estimator of ``--init-window``: each output's error divided by its
+    standard deviation in training (the hybrid's normalisation), as the fit divides by the training split's."""
+    from nnfmu.errors import ConfigError
+    from nnfmu.physics.initial_state import with_init_window
+
+    if not window or window == 1:
+        return model
+    if model.spec.source.get("kind") != "nnfmu-hybrid":
+        raise ConfigError(f"--init-window applies to physics, fits and hybrids; a network's init window is learned "
+                          f"in training (nnfmu train --init-window {window}); leave --init-window out of export")
+    return with_init_window(model, window, y_scale=network.y_std.detach().double().numpy(),
+                            x_scale=network.physics.state_scales or None)
 
 
 def default_name(out: Path) -> str:
@@ -139,12 +168,12 @@ def export_checkpoint(args: argparse.Namespace) -> int:
     check_writable(out)
     name = args.name or default_name(out)
     if Path(args.checkpoint).suffix.lower() == ".json":
-        write_fmu(fitted_model(args.checkpoint, name), out, args)
+        write_fmu(fitted_model(args.checkpoint, name, args.init_window), out, args)
         return 0
     network = load_model(args.checkpoint)  # checkpoint errors first, before the heavier export imports
     from nnfmu.export import casadi_model
 
-    model = casadi_model(network, name=name)
+    model = _with_init_window(casadi_model(network, name=name), network, args.init_window)
     write_fmu(model, out, args)
     return 0
 

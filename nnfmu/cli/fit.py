@@ -62,6 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report-test", action="store_true",
                    help="also score the test split (default: train and validation only; choose on validation, "
                         "and look at test for the model finally chosen)")
+    p.add_argument("--init-window", dest="init_window", type=int, default=1, metavar="N",
+                   help="score every split after an init window of N samples, from the state that the FMU's "
+                        "estimator fits to them (kept in the fit file, so 'nnfmu export' builds that FMU); "
+                        "default 1: from the first sample's init rule")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
 
@@ -144,7 +148,7 @@ def _run(args: argparse.Namespace) -> int:
                        start={n: _number(v, "--start", n) for n, v in _pairs(args.start, "--start")},
                        window=args.window, starts=args.starts, seed=args.seed, solver=args.solver,
                        max_evaluations=args.max_evaluations, n_sub=args.n_sub, max_windows=args.max_windows,
-                       compile=args.compile)
+                       compile=args.compile, init_window=args.init_window)
     out = Path(args.out)
     if out.suffix.lower() != ".json":  # a fit in g.pt would be taken for a checkpoint by export and info
         raise ConfigError(f"-o {out}: a fit is written as JSON; give a name ending in .json (e.g. -o "
@@ -154,6 +158,9 @@ def _run(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.data)
     print(f"fit: {system.name} on {args.data} by {args.solver}, {args.starts} start(s)", flush=True)
     fit = fit_greybox(system, dataset, config, progress=not args.quiet, score_test=args.report_test)
+    if config.init_window > 1:
+        print(f"scores after an init window of {config.init_window} samples, from the state the FMU's estimator "
+              "fits to them (as nnfmu evaluate --init-window scores its FMU)")
     print("\n".join(_summary(fit.system, fit.report)))
     report = {**fit.report, "data": str(args.data), "input_range": training_range(dataset.train.u)}  # FMU range
     print(f"wrote {save_fit(out, fit.system, report)}")

@@ -4,7 +4,9 @@ SPEC is a registered model (:func:`nnfmu.physics.physics_names`), a model of you
 runs that file's code; docs/own-physics.md) or a ``.json`` physics document or grey-box fit result. The
 model is :meth:`nnfmu.physics.PhysicsSystem.model` (fixed-step RK4 with ``n_sub`` sub-steps per sample),
 written by the same builder as the networks; the FMU is standalone C and never needs the model file again.
-Its physical parameters become tunable FMU parameters unless ``--fixed-parameters`` bakes them in.
+Its physical parameters become tunable FMU parameters unless ``--fixed-parameters`` bakes them in. With
+``--init-window N`` its ``init`` estimates the whole state from the N samples before the start
+(:mod:`nnfmu.physics.initial_state`), set as the FMU's ``<channel>_past`` parameters.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from pathlib import Path
 
 from nnfmu.cli._arch import LazyChoices
 from nnfmu.cli._physics_info import physics_names
-from nnfmu.cli.export import add_fmu_options, check_fmu_options, write_fmu
+from nnfmu.cli.export import add_fmu_options, add_init_window_option, check_fmu_options, write_fmu
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="RK4 sub-steps per sample (default: the model's own choice)")
     p.add_argument("--fixed-parameters", action="store_true",
                    help="bake the physical parameters into the code instead of exposing them")
+    add_init_window_option(p)
     p.set_defaults(func=_run)
 
 
@@ -47,6 +50,9 @@ def _run(args: argparse.Namespace) -> int:
     system = physics_system(args.system)
     out = Path(args.out or f"{system.name}.fmu")
     check_writable(out)
-    model = system.model(n_sub=args.n_sub, expose_parameters=not args.fixed_parameters)
+    from nnfmu.physics.initial_state import estimating_model
+
+    model = estimating_model(system, n_sub=args.n_sub, expose_parameters=not args.fixed_parameters,
+                             init_window=args.init_window or 1)
     write_fmu(model, out, args)
     return 0

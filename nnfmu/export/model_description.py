@@ -122,7 +122,9 @@ class FmuDescription:
         pairs = {"output": zip(self.by_role("output"), s.outputs, strict=True),
                  "derivative": zip(self.by_role("derivative"), s.derivatives, strict=True),
                  "initial": ((self.variables[vr[slot]], knowns) for slot, knowns in s.initial)}[kind]
-        return sorted(((v, tuple(sorted(vr[k] for k in knowns))) for v, knowns in pairs),
+        per_past = max((v.size for v in self.by_role("past")), default=1)  # FMI 3: one array per channel
+        ref = lambda k: vr[("past", k[1] // per_past) if k[0] == "past" else k]  # noqa: E731
+        return sorted(((v, tuple(sorted({ref(k) for k in knowns}))) for v, knowns in pairs),
                       key=lambda pair: pair[0].value_reference)
 
     @property

@@ -34,7 +34,7 @@ import numpy as np
 
 from nnfmu.errors import FmuBuildError
 from nnfmu.export.codegen import patch_source
-from nnfmu.export.model_description import ContinuousStructure
+from nnfmu.export.model_description import ContinuousStructure, Slot
 from nnfmu.system import CasadiModel
 
 #: In every FMU (with model_me_casadi.h where there is an ODE); compiled through templates/nnfmu_me_model.c.
@@ -108,19 +108,40 @@ def _structural(fn: ca.Function, out: int, ins: dict[int, str]) -> list[tuple[tu
             for row in range(fn.size1_out(out))]
 
 
+def _known_slots(spec) -> list[tuple[str, int]]:
+    """The slot of each entry of init's inputs, in order: ``output_start``, ``input``, ``parameter`` by index, and
+    the init window's samples as ``("past", c (N - 1) + j)`` (channel ``c``, outputs then inputs; sample ``j``:
+    the FMI 2 scalar's index; the FMI 3 array's is ``c``)."""
+    n_past = spec.init_window - 1
+    slots = [("output_start", i) for i in range(spec.n_y)] + [("input", i) for i in range(spec.n_u)]
+    slots += [("parameter", i) for i in range(spec.n_p)]
+    if n_past:  # y_past, u_past: sample by sample, k = j width + c
+        slots += [("past", (k % spec.n_y) * n_past + k // spec.n_y) for k in range(n_past * spec.n_y)]
+        slots += [("past", (spec.n_y + k % spec.n_u) * n_past + k // spec.n_u) for k in range(n_past * spec.n_u)]
+    return slots
+
+
+def _initial_dependencies(model: CasadiModel, me: ca.Function) -> list[tuple[Slot, tuple[Slot, ...]]]:
+    """Each initial unknown (outputs, states, derivatives) and the knowns it depends on: one sparsity sweep of
+    init and the ODE over all of init's inputs at once (block by block took a minute for the arm's estimator)."""
+    spec = model.spec
+    sym, init_args = _symbols(model.init)
+    whole = sym.sym("knowns", sum(a.numel() for a in init_args))
+    args = ca.vertsplit(whole, np.cumsum([0] + [a.numel() for a in init_args]).tolist())
+    x0 = model.init(*args)
+    xdot, y = me(x0, args[1], *args[2:2 + (spec.n_p > 0)])
+    pattern = ca.DM(ca.Function("initial", [whole], [ca.vertcat(y, x0, xdot)]).jac_sparsity(0, 0), 1).full() != 0
+    rows = [(role, i) for role, n in (("output", spec.n_y), ("state", model.n_x), ("derivative", model.n_x))
+            for i in range(n)]
+    slots = _known_slots(spec)
+    return [(row, tuple(slots[j] for j in np.flatnonzero(pattern[r]))) for r, row in enumerate(rows)]
+
+
 def continuous_structure(model: CasadiModel) -> ContinuousStructure:
     """States, nominals and the dependencies of outputs, derivatives and initial unknowns (CasADi sparsity)."""
-    dynamics, spec = model.continuous, model.spec
+    dynamics = model.continuous
     me, _ = me_functions(model, "structure")
-    has_p = spec.n_p > 0
-    sym, init_args = _symbols(model.init)
-    x0 = model.init(*init_args)
-    outputs = me(x0, init_args[1], *init_args[2:])
-    initial_fn = ca.Function("initial", init_args, [outputs[1], x0, outputs[0]])
-    knowns = {0: "output_start", 1: "input", **({2: "parameter"} if has_p else {})}
-    initial = []
-    for out, role in enumerate(("output", "state", "derivative")):
-        initial += [((role, i), deps) for i, deps in enumerate(_structural(initial_fn, out, knowns))]
+    initial = _initial_dependencies(model, me)
     return ContinuousStructure(
         states=dynamics.states, nominals=dynamics.nominals,
         outputs=tuple(_structural(me, 1, {0: "state"})),

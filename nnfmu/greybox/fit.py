@@ -32,7 +32,9 @@ from nnfmu.greybox.window import compile_worthwhile
 from nnfmu.metrics import nrmse
 from nnfmu.physics.base import PhysicsSystem
 from nnfmu.physics.compiled import compile_function
+from nnfmu.physics.initial_state import estimating_model
 from nnfmu.progress import tqdm
+from nnfmu.protocols import Protocol
 
 __all__ = ["FitConfig", "GreyboxFit", "fit_greybox", "gauss_newton", "standard_errors", "score_system",
            "COMPILE_CHOICES"]
@@ -72,6 +74,12 @@ class FitConfig:
         ``"auto"`` (default): the windows' free runs and sensitivities run as compiled C when the ODE's
         instructions times the sub-steps reach :data:`~nnfmu.greybox.window.COMPILE_MIN_INSTRUCTIONS`;
         ``"on"`` or ``"off"`` decide. Same values either way.
+    init_window : int
+        1 (default): every split is scored by the free run from each record's first sample (the init rule).
+        ``N > 1``: by the free run after an init window of ``N`` samples, from the state that the FMU's
+        estimator (:mod:`nnfmu.physics.initial_state`) computes from them, with the errors divided by the
+        training split's standard deviation per output, as in the fit; the fit file keeps ``N``, so
+        ``nnfmu export`` builds that FMU, and ``nnfmu evaluate --init-window N`` gives the same scores.
     """
 
     free: tuple[str, ...] | None = None
@@ -86,13 +94,15 @@ class FitConfig:
     n_sub: int | None = None
     max_windows: int | None = None
     compile: str = "auto"
+    init_window: int = 1
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
             raise ConfigError(f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
         if self.compile not in COMPILE_CHOICES:
             raise ConfigError(f"compile must be one of {', '.join(COMPILE_CHOICES)}, got {self.compile!r}")
-        for name, low in (("window", 2), ("starts", 1), ("max_evaluations", 1), ("n_sub", 1), ("max_windows", 1)):
+        for name, low in (("window", 2), ("starts", 1), ("max_evaluations", 1), ("n_sub", 1), ("max_windows", 1),
+                          ("init_window", 1)):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or int(value) != value or value < low):
                 raise ConfigError(f"{name} must be a whole number >= {low}, got {value!r}")
@@ -129,25 +139,28 @@ def _errors(information: np.ndarray, sigma2: float, theta_scale: np.ndarray) -> 
 
 
 def score_system(system: PhysicsSystem, dataset, *, n_sub: int | None = None, compile: bool = False,
-                 splits=None) -> dict:
+                 init_window: int = 1, y_scale=None, splits=None) -> dict:
     """``{split: scores}``: the free run of every record from its first sample, NRMSE / RMSE / fit % per split
     (``splits``: the names to score, default every split of ``dataset``).
 
     ``compile``: the RK4 step runs as compiled C (same values; the arm's 36,300 training samples took 4 minutes
-    in CasADi's virtual machine).
+    in CasADi's virtual machine). ``init_window`` N > 1: the free run after the first N samples, from the
+    state the FMU's estimator gives (``y_scale``: its output scales; :mod:`nnfmu.physics.initial_state`),
+    scored from sample N on, as ``nnfmu evaluate --init-window N`` scores the FMU.
     """
-    model = system.model(n_sub=n_sub, expose_parameters=False)
+    model = estimating_model(system, n_sub=n_sub, expose_parameters=False, init_window=init_window, y_scale=y_scale)
     if compile:
         model = dataclasses.replace(model, step=compile_function(model.step))
-    out = {}
+    protocol, out = Protocol(init_window=init_window), {}
+    simulate = lambda u, y0, y_past, u_past: model.simulate(u, y0, y_past=y_past, u_past=u_past)  # noqa: E731
     for name, split in dataset.splits.items():
         if splits is not None and name not in splits:
             continue
-        predictions = [model.simulate(u, y[0]) for u, y in zip(split.u, split.y)]
+        predictions = [protocol.predict(simulate, u, y, init_window - 1) for u, y in zip(split.u, split.y)]
         if not all(np.isfinite(p).all() for p in predictions):
             out[name] = {"nrmse": None, "note": "the free run diverged (NaN or Inf)"}
             continue
-        scores = nrmse(list(split.y), predictions).to_json(list(dataset.outputs))
+        scores = protocol.score(list(split.y), predictions).to_json(list(dataset.outputs))
         scores.pop("trajectories")
         out[name] = scores
     return out
@@ -283,8 +296,9 @@ def fit_greybox(system: PhysicsSystem, dataset, config: FitConfig | None = None,
               "starts": runs, "notes": best.notes, "converged": best.converged, "stopped": best.reason,
               "identifiability": (identifiability_report(unknowns.names, theta, problem.theta_scale, information,
                                                          sigma2) if np.isfinite(sigma2) else None),
-              "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled,
-                                     splits=None if score_test else ("train", "valid"))}
+              "init_window": config.init_window, "output_scales": y_std.tolist(),
+              "scores": score_system(fitted, dataset, n_sub=n_sub, compile=compiled, init_window=config.init_window,
+                                     y_scale=y_std, splits=None if score_test else ("train", "valid"))}
     report["seconds"] = round(time.perf_counter() - t0, 3)
     return GreyboxFit(system=fitted, report=report)
 

@@ -8,6 +8,8 @@
 - :func:`arm_system` / :class:`ArmParams`: the KUKA KR300 arm (RNEA in :mod:`nnfmu.physics.arm_dynamics`).
 - :func:`slider_system` / :class:`SliderParams`: a mass on a rail with friction (an integrating plant).
 - :func:`rk4_step`, :func:`rk4_function`: the fixed-step RK4 used everywhere.
+- :func:`estimating_model`, :func:`with_init_window`: a model whose ``init`` estimates the whole state from an
+  init window (:mod:`nnfmu.physics.initial_state`), for the FMUs of physics models, fits and hybrids.
 - :func:`generate_dataset`: simulated datasets (``nnfmu generate``); :func:`generate_model_dataset` for any
   model (a user's own) with the toolkit's excitation signals.
 - :func:`resolve_physics` / :func:`register_physics`: the models by name (:mod:`nnfmu.physics.registry`),
@@ -23,6 +25,7 @@ from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.document import system_from_document, system_to_document
 from nnfmu.physics.generate import check_request, generate_dataset
 from nnfmu.physics.generate_model import generate_model_dataset
+from nnfmu.physics.initial_state import estimating_model, with_init_window
 from nnfmu.physics.model_file import models_in_file
 from nnfmu.physics.rk4 import rk4_function, rk4_step
 from nnfmu.physics.slider import SliderParams, slider_system
@@ -37,6 +40,8 @@ __all__ = [
     "ModelBuilder",
     "check_system",
     "generate_model_dataset",
+    "estimating_model",
+    "with_init_window",
     "models_in_file",
     "PhysicsEntry",
     "StudyPreset",

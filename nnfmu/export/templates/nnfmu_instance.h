@@ -101,9 +101,12 @@ NNFMU_INTERNAL void nnfmu_start_values(nnfmu_values *v);
 NNFMU_INTERNAL double nnfmu_samples_by(const nnfmu_values *v, double t);
 /* Inputs and parameters finite (else an Error) and inputs inside [min, max] (else a Warning or an Error). */
 NNFMU_INTERNAL nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double t);
+/* init's window (inst->y_past, inst->u_past) from the parameters <c>_past, NaN (not set) as the rest state:
+ * returns the index of an infinite value of the parameters, or -1 (nnfmu_step.c). */
+NNFMU_INTERNAL int nnfmu_fill_window(nnfmu_instance *inst, const double *u0);
 
 /* Model Exchange (nnfmu_me.c). The continuous states: x once initialization has ended (or a solver set it),
- * before that init(y0, u, p) (nnfmu_ode_values.x_init). */
+ * before that init(y0, u, p) with the init window, if any (nnfmu_ode_values.x_init). */
 NNFMU_INTERNAL const double *nnfmu_me_states(nnfmu_instance *inst);
 /* Evaluate the ODE into inst->ode.xdot and inst->ode.y, the inputs guarded as in doStep: NNFMU_OK, a Warning (an
  * input outside its range) or an Error. */

@@ -34,14 +34,22 @@ static int ode_arguments(nnfmu_instance *inst, const double *x) {
   return n;
 }
 
-/* The state: x once initialization has ended (or an integrator set it), before that init(y0, u, p). */
+/* The state: x once initialization has ended (or an integrator set it), before that init(y0, u, p), with the
+ * init window if any (an infinite window value gives NaN, as a failed init). */
 const double *nnfmu_me_states(nnfmu_instance *inst) {
+  int n = 2, bad = -1;
   if (inst->v.x_ready) return inst->v.x;
   inst->arg[0] = inst->v.y_start;
   inst->arg[1] = inst->v.u;
-  if (NNFMU_NP > 0) inst->arg[2] = inst->v.p;
+  if (NNFMU_NP > 0) inst->arg[n++] = inst->v.p;
+#if NNFMU_NWIN > 0
+  bad = nnfmu_fill_window(inst, inst->v.u);
+  inst->arg[n++] = inst->y_past;
+  inst->arg[n++] = inst->u_past;
+#endif
+  (void)n;
   inst->res[0] = inst->ode.x_init;
-  if (NNFMU_INIT(inst->arg, inst->res, inst->iw, inst->w, 0) != 0)
+  if (bad >= 0 || NNFMU_INIT(inst->arg, inst->res, inst->iw, inst->w, 0) != 0)
     memset(inst->ode.x_init, 0xff, sizeof inst->ode.x_init); /* NaN: reported by the callers' checks */
   return inst->ode.x_init;
 }

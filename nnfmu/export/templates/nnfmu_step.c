@@ -94,7 +94,7 @@ nnfmu_status nnfmu_check_inputs(nnfmu_instance *inst, const char *caller, double
 /* init's window in CasADi's layout (y_past, u_past: sample by sample, oldest first) from the parameters
  * <c>_past (channel by channel); a sample not set (NaN) is the rest state: y0, or the first input u0.
  * Returns the index of an infinite value of the parameters, or -1. */
-static int fill_window(nnfmu_instance *inst, const double *u0) {
+int nnfmu_fill_window(nnfmu_instance *inst, const double *u0) {
   int c, j;
   for (c = 0; c < NNFMU_NY + NNFMU_NU; ++c)
     for (j = 0; j < NNFMU_NWIN; ++j) {
@@ -143,7 +143,7 @@ static nnfmu_status advance(nnfmu_instance *inst, const char *caller, long long 
   double *current = inst->xa, *next = inst->xb, *swap;
   long long k;
   int bad;
-  if (!v->x_ready && (bad = fill_window(inst, u_first)) >= 0)
+  if (!v->x_ready && (bad = nnfmu_fill_window(inst, u_first)) >= 0)
     return nnfmu_error(inst, "%s: sample %d (1 = the oldest) of the init window %s is %g; give finite values, or "
                        "NaN where a sample is not known (the rest state is used there)", caller,
                        bad % NNFMU_ALLOC(NNFMU_NWIN) + 1, /* ALLOC: no constant division by 0 without a window */
