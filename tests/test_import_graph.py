@@ -22,7 +22,7 @@ PACKAGE = Path(nnfmu.__file__).parent
 #: Lowest first: a unit may import its own layer (without circles) and the layers below it, never one above.
 #: Top-level modules and subpackages are units; a new one must be placed here.
 LAYERS = (
-    ("ground", {"errors", "atomic", "cbuild", "identifiers", "_lazy", "__version__", "tempdirs", "window_names",
+    ("ground", {"errors", "atomic", "cbuild", "identifiers", "_lazy", "__version__", "tempdirs", "window_names", "plugins",
                 "system", "signals", "metrics", "valid_range", "protocols", "limits", "progress"}),
     ("data", {"data"}),
     ("physics, linear and co-simulation", {"physics", "linear", "cosim", "plots", "greybox"}),

@@ -31,12 +31,12 @@ This module imports neither torch nor CasADi nor any architecture.
 from __future__ import annotations
 
 import importlib
-import os
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Callable, Mapping, TypeAlias, Union
 
 from nnfmu.errors import ConfigError
+from nnfmu.plugins import PLUGINS_ENV, entry_point_list, import_once, plugin_modules
 from nnfmu.identifiers import is_c_identifier
 
 __all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "Ref", "architecture",
@@ -44,7 +44,6 @@ __all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "Ref", 
            "register_architecture", "resolve", "search_order"]
 
 ENTRY_POINT_GROUP = "nnfmu.architectures"
-PLUGINS_ENV = "NNFMU_PLUGINS"
 
 #: A class or function given directly, or lazily as ``"package.module:attribute"`` (:func:`resolve`).
 Ref: TypeAlias = Union[type, Callable[..., Any], str]
@@ -246,14 +245,11 @@ _loaded: set[str] = set()
 
 
 def _entry_points() -> list:
-    from importlib.metadata import entry_points
-
-    return list(entry_points(group=ENTRY_POINT_GROUP))
+    return entry_point_list(ENTRY_POINT_GROUP)
 
 
 def _plugin_modules() -> list[str]:
-    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
-    return [ep.value.split(":")[0] for ep in _entry_points()] + [m for m in listed if m]
+    return plugin_modules(ENTRY_POINT_GROUP)
 
 
 def _ordered() -> tuple[Architecture, ...]:
@@ -268,18 +264,7 @@ def load_plugins() -> None:
 
     Raises ConfigError naming the modules that cannot be imported, after importing the others (tried once).
     """
-    failed = []
-    for module in _plugin_modules():
-        if module in _loaded:
-            continue
-        _loaded.add(module)
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            failed.append(f"{module!r} ({exc})")
-    if failed:
-        raise ConfigError(f"cannot import the architecture plugin {', '.join(failed)}; install it, put its folder "
-                          f"on PYTHONPATH, or drop it from {PLUGINS_ENV}")
+    import_once(_plugin_modules(), _loaded, "architecture plugin")
 
 
 def architecture(arch: str) -> Architecture:

@@ -13,13 +13,13 @@ need, so that no other module lists the models by name.
 
 from __future__ import annotations
 
-import importlib
 import os
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 from nnfmu.errors import ConfigError
+from nnfmu.plugins import PLUGINS_ENV, import_once, plugin_modules
 from nnfmu.physics.base import PhysicsSystem
 
 __all__ = ["PhysicsEntry", "StudyPreset", "register_physics", "physics_names", "physics_entry", "resolve_physics",
@@ -156,17 +156,13 @@ def register_physics(entry: PhysicsEntry) -> None:
 
 #: Entry-point group of installed packages that register physics models (``[project.entry-points]``).
 ENTRY_POINT_GROUP = "nnfmu.physics"
-#: Modules to import (comma-separated) that register models or architectures: the same variable as
-#: :data:`nnfmu.models.architectures.PLUGINS_ENV`, so that one plug-in module can register both.
-PLUGINS_ENV = "NNFMU_PLUGINS"
+#: The plug-in modules imported so far (:data:`nnfmu.plugins.PLUGINS_ENV` names models and architectures alike, so
+#: that one plug-in module can register both).
 _loaded: set[str] = set()
 
 
 def _plugin_modules() -> list[str]:
-    from importlib.metadata import entry_points
-
-    listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
-    return [ep.value.split(":")[0] for ep in entry_points(group=ENTRY_POINT_GROUP)] + [m for m in listed if m]
+    return plugin_modules(ENTRY_POINT_GROUP)
 
 
 def _builtins() -> None:
@@ -176,17 +172,7 @@ def _builtins() -> None:
 def _plugins() -> None:
     """Import every plug-in module not imported yet (each tried once; they register themselves).
     ConfigError names the plug-ins that cannot be imported."""
-    failed = []
-    for module in _plugin_modules():
-        if module not in _loaded:
-            _loaded.add(module)
-            try:
-                importlib.import_module(module)
-            except ImportError as exc:
-                failed.append(f"{module!r} ({exc})")
-    if failed:
-        raise ConfigError(f"cannot import the plug-in {', '.join(failed)}; install it, put its folder on "
-                          f"PYTHONPATH, or drop it from {PLUGINS_ENV}")
+    import_once(_plugin_modules(), _loaded, "plug-in")
 
 
 def physics_names(*, plugins: bool = True) -> tuple[str, ...]:
