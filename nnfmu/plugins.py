@@ -16,17 +16,12 @@ from nnfmu.errors import ConfigError
 PLUGINS_ENV = "NNFMU_PLUGINS"
 
 
-def entry_point_list(group: str) -> list:
-    """The installed entry points of ``group``, in their order."""
+def plugin_modules(group: str) -> list[str]:
+    """The modules the installed entry points of ``group`` name, then those of :data:`PLUGINS_ENV`."""
     from importlib.metadata import entry_points
 
-    return list(entry_points(group=group))
-
-
-def plugin_modules(group: str) -> list[str]:
-    """The modules the entry points of ``group`` name, then those of :data:`PLUGINS_ENV`."""
     listed = [m.strip() for m in os.environ.get(PLUGINS_ENV, "").replace(os.pathsep, ",").split(",")]
-    return [ep.value.split(":")[0] for ep in entry_point_list(group)] + [m for m in listed if m]
+    return [ep.value.split(":")[0] for ep in entry_points(group=group)] + [m for m in listed if m]
 
 
 def import_once(modules, loaded: set, what: str) -> None:

@@ -205,7 +205,7 @@ def test_sub_network_mismatch_is_caught_by_the_dry_run():
 
 
 def test_config_options_are_checked():
-    with pytest.raises(ConfigError, match="unknown architecture 'cnn'; choose one of mlp, rnn, lstm, gru, tcn"):
+    with pytest.raises(ConfigError, match="unknown architecture 'cnn'; choose one of gru, hybrid, lstm, mlp, node, rnn, ss, tcn"):
         ModelConfig(arch="cnn", n_u=1, n_y=1)
     with pytest.raises(UnknownOptionError, match="unknown RecurrentConfig option.*'hiden'.*valid options are"):
         ModelConfig.from_dict({"arch": "gru", "n_u": 1, "n_y": 1, "hiden": 8})

@@ -36,7 +36,7 @@ from types import MappingProxyType
 from typing import Any, Callable, Mapping, TypeAlias, Union
 
 from nnfmu.errors import ConfigError
-from nnfmu.plugins import PLUGINS_ENV, entry_point_list, import_once, plugin_modules
+from nnfmu.plugins import PLUGINS_ENV, import_once, plugin_modules
 from nnfmu.identifiers import is_c_identifier
 
 __all__ = ["ENTRY_POINT_GROUP", "PLUGINS_ENV", "Architecture", "Option", "Ref", "architecture",
@@ -244,19 +244,14 @@ def register_architecture(record: Architecture) -> Architecture:
 _loaded: set[str] = set()
 
 
-def _entry_points() -> list:
-    return entry_point_list(ENTRY_POINT_GROUP)
-
-
 def _plugin_modules() -> list[str]:
     return plugin_modules(ENTRY_POINT_GROUP)
 
 
 def _ordered() -> tuple[Architecture, ...]:
-    """The records registered so far: those the entry points name in their order (as pyproject.toml lists them,
-    whichever was imported first), then the others in registration order."""
-    place = {ep.name: i for i, ep in enumerate(_entry_points())}
-    return tuple(sorted(_RECORDS.values(), key=lambda r: place.get(r.name, len(place))))
+    """The records registered so far, by name: an order that neither the import order nor the installer changes
+    (setuptools writes the entry points sorted by name, not in pyproject.toml's order)."""
+    return tuple(sorted(_RECORDS.values(), key=lambda r: r.name))
 
 
 def load_plugins() -> None:
@@ -279,8 +274,8 @@ def architecture(arch: str) -> Architecture:
         except ConfigError as exc:
             failed = exc
     if arch not in _RECORDS:
-        raise ConfigError(f"unknown architecture {arch!r}; choose one of {', '.join(r.name for r in _ordered())}, or make its package "
-                          f"known (an entry point in the group {ENTRY_POINT_GROUP!r}, or its module in "
+        raise ConfigError(f"unknown architecture {arch!r}; choose one of {', '.join(r.name for r in _ordered())}, "
+                          f"or make its package known (an entry point in the group {ENTRY_POINT_GROUP!r}, or its module in "
                           f"{PLUGINS_ENV})" + ("" if failed is None else f" ({failed})"))
     return _RECORDS[arch]
 
@@ -295,8 +290,7 @@ def is_architecture(arch: str) -> bool:
 
 
 def records() -> tuple[Architecture, ...]:
-    """Every architecture's record, the plugins loaded first: those of the entry points in their order, then the
-    others in registration order."""
+    """Every architecture's record, the plugins loaded first, by name."""
     load_plugins()
     return _ordered()
 
