@@ -98,11 +98,11 @@ def test_the_scan_finds_a_comparison_and_a_list_added_anywhere():
 
 
 def test_each_public_name_of_a_package_is_declared_once():
-    """models, networks, training and ss write each public name once, as an import (nnfmu._lazy.declared_exports):
+    """models, networks, training, ss and the hybrid write each public name once, as an import (nnfmu._lazy.declared_exports):
     no lazy table or ``__all__`` list beside it, and every name resolves, lazily or not."""
     import importlib
 
-    for package in ("nnfmu.models", "nnfmu.networks", "nnfmu.training", "nnfmu.ss"):
+    for package in ("nnfmu.models", "nnfmu.networks", "nnfmu.training", "nnfmu.ss", "nnfmu.hybrid"):
         module = importlib.import_module(package)
         source = Path(module.__file__).read_text(encoding="utf-8")
         assert "_LAZY" not in source and "__all__ = [" not in source, package

@@ -19,13 +19,14 @@ neither torch nor CasADi (``nnfmu --help`` lists the hybrid's options without th
 
 from typing import TYPE_CHECKING
 
-from nnfmu._lazy import lazy_exports
-from nnfmu.errors import ConfigError
-from nnfmu.hybrid._exports import declared_exports
-from nnfmu.limits import MAX_RK4_SUBSTEPS
-from nnfmu.models.architectures import Architecture, Option, register_architecture
+from nnfmu._lazy import declared_exports
+from nnfmu.errors import ConfigError as _ConfigError
+from nnfmu.limits import MAX_RK4_SUBSTEPS as _MAX_RK4_SUBSTEPS
+from nnfmu.models.architectures import Architecture as _Architecture
+from nnfmu.models.architectures import Option as _Option
+from nnfmu.models.architectures import register_architecture as _register
 
-if TYPE_CHECKING:  # the one declaration of the public names, imported on first use (nnfmu.hybrid._exports)
+if TYPE_CHECKING:  # each public name, declared once, imported on first use (nnfmu._lazy.declared_exports)
     from nnfmu.hybrid._sx_source import SUPPORTED_OPS
     from nnfmu.hybrid.casadi_torch import GRADIENT_MODES, TorchFunction, sx_to_torch
     from nnfmu.hybrid.compiled_torch import BACKENDS, CompiledFunction, casadi_to_torch, compiled_to_torch
@@ -33,9 +34,7 @@ if TYPE_CHECKING:  # the one declaration of the public names, imported on first 
     from nnfmu.hybrid.export import hybrid_casadi_model, hybrid_to_casadi
     from nnfmu.hybrid.model import HybridStepModel
 
-_LAZY = declared_exports(__file__)
-__all__ = sorted(_LAZY)
-__getattr__, __dir__ = lazy_exports("nnfmu.hybrid", globals(), _LAZY)
+__getattr__, __dir__, __all__ = declared_exports(globals())
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -52,7 +51,7 @@ def counting_config(config):
 
 def check_device(config, device) -> None:
     if device.type != "cpu" and config.physics_backend == "compiled":
-        raise ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
+        raise _ConfigError(f"a hybrid's compiled physics runs on the CPU only, not on {device}; train it with "
                           "--physics-backend sx (the SX-to-torch translation runs on any device) or --device cpu")
 
 
@@ -60,13 +59,13 @@ def check_device(config, device) -> None:
 # written out so that the command line needs neither torch nor CasADi (tests/test_hybrid_cli.py compares them).
 #: How a model with physics inside steps and runs it (the hybrid's and the neural ODE's options).
 PHYSICS_OPTIONS = (
-    Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, MAX_RK4_SUBSTEPS),
+    _Option(flag="--n-sub", field="n_sub", type="int", metavar="N", bounds=(1, _MAX_RK4_SUBSTEPS),
            help="RK4 sub-steps per sample (default: the physics' own)"),
-    Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
+    _Option(flag="--physics-backend", field="physics_backend", choices=("compiled", "sx"),
            help="how torch runs the physics: compiled (C, default) or sx (torch operations; no C compiler needed)"),
 )
 
-register_architecture(Architecture(
+_register(_Architecture(
     name="hybrid",
     config_class="nnfmu.hybrid.config:HybridConfig",
     model_class="nnfmu.hybrid.model:HybridStepModel",
@@ -75,20 +74,20 @@ register_architecture(Architecture(
     training_rollout="nnfmu.hybrid.graphed:graphed_rollout",
     casadi_model="nnfmu.hybrid.export:hybrid_casadi_model",
     options=(
-        Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",
+        _Option(flag="--physics", field="physics", required=True, metavar="NAME|FILE.py:NAME",
                choices="nnfmu.physics.registry:physics_names", open_choices=True,
                help="the physics model the network corrects: a registered one (%(choices)s) or FILE.py:NAME, "
                     "a model of your own; also FILE.json, a grey-box fit from 'nnfmu fit', which the hybrid starts "
                     "from"),
-        Option(flag="--physics-params", field="physics_params", metavar="FILE.json",
+        _Option(flag="--physics-params", field="physics_params", metavar="FILE.json",
                parse="nnfmu.hybrid.config:load_physics_params",
                help="JSON file of physical parameter values replacing the nominal ones, e.g. {\"k_s\": 32500} "
                     "(default: nominal)"),
-        Option(flag="--train-physics", field="train_physics", metavar="NAME,...", parse=_names,
+        _Option(flag="--train-physics", field="train_physics", metavar="NAME,...", parse=_names,
                help="comma-separated physical parameters trained with the network, in log-space, or 'none' to keep "
                     "the physics as given (default: a registered model's: none; a model file's or a fit's .json: "
                     "its free parameters; when they train: --physics-schedule)"),
-        Option(flag="--correction", field="correction", choices=("derivative", "step"),
+        _Option(flag="--correction", field="correction", choices=("derivative", "step"),
                help="where the network corrects the physics: derivative (inside every RK4 stage, default) or "
                     "step (after it)"),
         *PHYSICS_OPTIONS,

@@ -19,23 +19,24 @@ This module registers the record only (no torch, no CasADi); the code is importe
 from typing import TYPE_CHECKING
 
 # registers the hybrid first (the shared options appear under it); the physics hooks are the hybrid's
-from nnfmu.hybrid import PHYSICS_OPTIONS, check_device, counting_config
-from nnfmu._lazy import lazy_exports
-from nnfmu.hybrid._exports import declared_exports
-from nnfmu.models.architectures import Architecture, Option, register_architecture
+from nnfmu.hybrid import PHYSICS_OPTIONS as _PHYSICS_OPTIONS
+from nnfmu.hybrid import check_device as _check_device
+from nnfmu.hybrid import counting_config as _counting_config
+from nnfmu._lazy import declared_exports
+from nnfmu.models.architectures import Architecture as _Architecture
+from nnfmu.models.architectures import Option as _Option
+from nnfmu.models.architectures import register_architecture as _register
 
 NODE_ARCH = "node"
 
-if TYPE_CHECKING:  # the one declaration of the public names, imported on first use (nnfmu.hybrid._exports)
+if TYPE_CHECKING:  # each public name, declared once, imported on first use (nnfmu._lazy.declared_exports)
     from nnfmu.node.config import NodeConfig, node_physics
     from nnfmu.node.model import NodeStepModel
 
-_LAZY = declared_exports(__file__)
-__all__ = ["NODE_ARCH", *sorted(_LAZY)]
+__getattr__, __dir__, _declared = declared_exports(globals())
+__all__ = ["NODE_ARCH", *_declared]
 
-__getattr__, __dir__ = lazy_exports("nnfmu.node", globals(), _LAZY)
-
-register_architecture(Architecture(
+_register(_Architecture(
     name=NODE_ARCH,
     config_class="nnfmu.node.config:NodeConfig",
     model_class="nnfmu.node.model:NodeStepModel",
@@ -43,18 +44,18 @@ register_architecture(Architecture(
     to_casadi="nnfmu.hybrid.export:hybrid_to_casadi",
     casadi_model="nnfmu.hybrid.export:hybrid_casadi_model",
     options=(
-        Option(flag="--states", field="n_states", type="int", metavar="N", bounds=(1, None),
+        _Option(flag="--states", field="n_states", type="int", metavar="N", bounds=(1, None),
                help="states of the neural ODE, at least the outputs' number (default: max(2 n_y, 4)); the "
                     "first n_y are the outputs, the others latent"),
-        Option(flag="--time-scale", field="time_scale", type="float", metavar="SAMPLES", bounds=(0, None),
+        _Option(flag="--time-scale", field="time_scale", type="float", metavar="SAMPLES", bounds=(0, None),
                open_bounds=(True, False),
                help="sample times in which the network's unit output moves a state by one output standard "
                     "deviation: xdot = N(x, u) / (SAMPLES * Ts) (default 10)"),
-        *PHYSICS_OPTIONS,
+        *_PHYSICS_OPTIONS,
     ),
     linear_path=False,
     strategies=("parallel",),
     dtype="float64",
-    counting_config=counting_config,
-    check_device=check_device,
+    counting_config=_counting_config,
+    check_device=_check_device,
 ))
