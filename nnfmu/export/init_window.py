@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import casadi as ca
 
-from nnfmu.export import casadi_layers as nets
 from nnfmu.models import StepModel
 
 

@@ -29,7 +29,6 @@ from nnfmu.greybox.problem import Windows, build_problem, cut_windows, theta_sca
 from nnfmu.greybox.setup import Unknowns, check_dataset, choose_unknowns, spread_starts
 from nnfmu.greybox.solvers import SOLVERS, solve
 from nnfmu.greybox.window import compile_worthwhile
-from nnfmu.metrics import nrmse
 from nnfmu.physics.base import PhysicsSystem
 from nnfmu.physics.compiled import compile_function
 from nnfmu.physics.initial_state import estimating_model

@@ -19,7 +19,7 @@ from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 from nnfmu.errors import ConfigError
-from nnfmu.plugins import PLUGINS_ENV, import_once, plugin_modules
+from nnfmu.plugins import import_once, plugin_modules
 from nnfmu.physics.base import PhysicsSystem
 
 __all__ = ["PhysicsEntry", "StudyPreset", "register_physics", "physics_names", "physics_entry", "resolve_physics",
