@@ -62,10 +62,11 @@ def _build(cache: Path) -> Path | str:
 
 
 @pytest.fixture(scope="session")
-def fmusim(request) -> Path:
+def fmusim(request, tmp_path_factory) -> Path:
     if os.environ.get("NNFMU_FMUSIM"):
         return Path(os.environ["NNFMU_FMUSIM"])
-    built = _build(Path(request.config.cache.mkdir("fmusim")))
+    cache = getattr(request.config, "cache", None)  # None under -p no:cacheprovider: build it for this run only
+    built = _build(Path(cache.mkdir("fmusim")) if cache is not None else tmp_path_factory.mktemp("fmusim"))
     if isinstance(built, str):
         pytest.skip(f"fmusim cannot be built here: {built}")
     return built
