@@ -104,12 +104,17 @@ def rank_line(name: str, pairs: list[tuple[float, float]]) -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("datasets", nargs="+", type=Path)
-    p.add_argument("--archs", nargs="+", default=["mlp", "rnn", "lstm", "gru", "tcn"])
+    p.add_argument("--archs", nargs="+", help="default: every architecture the search takes part in "
+                   "(nnfmu.models.architectures.search_order(): the five networks and ss)")
     p.add_argument("--work", type=Path, default=Path("defaults-table"))
     p.add_argument("--max-minutes", type=float, help="the time budget of every training (default: none)")
     p.add_argument("--reuse-linear", action="store_true",
                    help="keep the linear.fmu of an earlier run in the work folder instead of identifying it again")
     args = p.parse_args(argv)
+    if args.archs is None:
+        from nnfmu.models.architectures import search_order
+
+        args.archs = list(search_order())
     if "search" in args.archs and args.max_minutes is None:
         p.error("the 'search' cell needs --max-minutes (the search's time budget)")
     extra = [] if args.max_minutes is None else ["--max-minutes", str(args.max_minutes)]
