@@ -62,9 +62,18 @@ def trial(data: Path, arch: str, scheme: str, i: int, epochs: int, minutes: floa
            "--max-minutes", str(minutes), "--valid-blocks", str(blocks), "--threads", "1", "--quiet", "-o", str(out)]
     done = subprocess.run(cmd, capture_output=True, text=True)
     (work / f"{scheme}-{i}.log").write_text(done.stdout + done.stderr)
-    if done.returncode != 0:
+    # a training that diverged exits 1 but keeps its best weights, scored: a trial of the search ends so too
+    if done.returncode != 0 and not (out.is_file() and "the best weights so far are kept" in done.stderr):
         raise SystemExit(f"{' '.join(cmd)} failed: {done.stderr.strip()[-1000:]}")
-    summary = load_checkpoint(out)["summary"]
+    ckpt = load_checkpoint(out)
+    summary = ckpt["summary"]
+    if summary.get("test_nrmse") is None:  # the diverged training's best weights: score them as training would
+        from nnfmu.data import load_dataset
+        from nnfmu.models import model_from_checkpoint
+        from nnfmu.training.evaluate import free_run_nrmse
+
+        test = free_run_nrmse(model_from_checkpoint(ckpt), load_dataset(data).test, float64=True).mean
+        return float(summary["best_valid_nrmse"]), float(test)
     return float(summary["best_valid_nrmse"]), float(summary["test_nrmse"])
 
 
