@@ -124,3 +124,42 @@ def test_one_record_is_refitted_whole_after_the_order_is_chosen_on_its_tail(tmp_
     assert refit.info["refit"]["samples"] == n and "refit" not in held.info
     assert not np.allclose(refit.system.A, held.system.A)  # estimated again, on 100 % instead of 75 %
     assert refit.info["refit"]["nrmse_valid_before"] == pytest.approx(held.info["nrmse_valid"], rel=1e-12)
+
+
+def _pieces_of_one_recording(contiguous: bool = True):
+    """The third-order system run once for 1000 samples and cut into consecutive pieces of 100 (the robot
+    benchmark's layout, smaller): 6 for training, 2 for validation, the last 200 for the test."""
+    rng = np.random.default_rng(3)
+    A = np.array([[0.95, 0.2, 0.0], [-0.2, 0.95, 0.1], [0.0, 0.0, 0.8]])
+    B, C = rng.normal(size=(3, 1)), rng.normal(size=(1, 3))
+    u, x, y = rng.normal(size=(1000, 1)), np.zeros(3), np.empty((1000, 1))
+    for k in range(1000):
+        y[k], x = C @ x, A @ x + B @ u[k]
+    y += rng.normal(size=y.shape) * 0.01
+    cut = lambda a, lo, hi: [a[i:i + 100] for i in range(lo, hi, 100)]  # noqa: E731
+    return from_arrays(Ts=0.1, u_train=cut(u, 0, 600), y_train=cut(y, 0, 600), u_valid=cut(u, 600, 800),
+                       y_valid=cut(y, 600, 800), u_test=[u[800:]], y_test=[y[800:]],
+                       source={"contiguous": contiguous})
+
+
+def test_consecutive_pieces_of_one_recording_are_identified_joined_as_train_joins_them(tmp_path, capsys):
+    """Pieces the dataset calls consecutive are fitted as the one recording they are (the networks' training
+    joins them too), not each from its own start: the model is the joined records' model; --no-join is not."""
+    data = save_dataset(_pieces_of_one_recording(), tmp_path / "pieces")
+    assert main(["linear", "--data", str(data), "--order", "3", "--save", str(tmp_path / "j.json"), "--quiet"]) == 0
+    assert "the 6 training and 2 validation records joined end to end" in capsys.readouterr().out
+    joined = _pieces_of_one_recording(contiguous=False)
+    one = from_arrays(Ts=0.1, u_train=[np.concatenate(joined.train.u)], y_train=[np.concatenate(joined.train.y)],
+                      u_valid=[np.concatenate(joined.valid.u)], y_valid=[np.concatenate(joined.valid.y)],
+                      u_test=list(joined.test.u), y_test=list(joined.test.y))
+    assert main(["linear", "--data", str(save_dataset(one, tmp_path / "one")), "--order", "3",
+                 "--save", str(tmp_path / "one.json"), "--quiet"]) == 0
+    assert main(["linear", "--data", str(data), "--order", "3", "--no-join", "--save", str(tmp_path / "apart.json"),
+                 "--quiet"]) == 0
+    assert "joined end to end" not in capsys.readouterr().out
+    model, reference, apart = (load_linear(tmp_path / f"{n}.json") for n in ("j", "one", "apart"))
+    assert model.info["joined"] == {"train": 6, "valid": 2} and apart.info["joined"] is None
+    for name in ("A", "B", "C"):
+        np.testing.assert_allclose(getattr(model.system, name), getattr(reference.system, name), rtol=0, atol=1e-12)
+    assert not np.allclose(model.system.A, apart.system.A)
+    assert model.info["refit"]["records"] == 2  # the joined training and validation records

@@ -46,6 +46,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="after choosing the order and the refinement's length on validation, estimate the model "
                         "again on the training and validation data together (default; --no-refit keeps the model "
                         "fitted without the validation data)")
+    p.add_argument("--join", action=argparse.BooleanOptionalAction, default=True,
+                   help="where the dataset says its records are consecutive pieces of one recording (the robot), "
+                        "join each split's records end to end before identifying, as `nnfmu train` joins them "
+                        "(default; --no-join fits each piece from its own start)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
                    help="BLAS threads (default 1: faster here, and the result does not depend on the core count)")
     p.add_argument("-o", "--out", help="the .fmu file to write")
@@ -65,7 +69,10 @@ def _summary(model, dataset) -> list[str]:
     if candidates:  # the orders compared after a short refinement (nnfmu.linear.order)
         how += ", among " + ", ".join(f"{n}: {v:.4f}" for n, v in candidates.items()) + " shortly refined"
     sv = ", ".join(f"{v:.3g}" for v in info["singular_values"][:model.n_x + 3])
-    lines = [f"order {model.n_x} ({how}); horizon {info['horizon']}; singular values {sv}, ...",
+    joined = info.get("joined")
+    lines = [f"records: the {joined['train']} training and {joined['valid']} validation records joined end to end "
+             "(the dataset says they are consecutive pieces of one recording; --no-join keeps them apart)"] if joined else []
+    lines += [f"order {model.n_x} ({how}); horizon {info['horizon']}; singular values {sv}, ...",
              f"free-run NRMSE on {info['scored_on']}: subspace {info['nrmse_subspace']:.4f}"]
     refinement = info.get("refinement")
     if refinement:
@@ -141,7 +148,8 @@ def _run(args: argparse.Namespace) -> int:
     config = LinearConfig(order=args.order, max_order=args.max_order, init=args.init,
                           order_candidates=args.order_candidates, refine=not args.no_refine,
                           refine_x0=args.refine_x0, refine_method=args.refine_method,
-                          max_evaluations=args.max_evaluations, threads=args.threads, refit=args.refit)
+                          max_evaluations=args.max_evaluations, threads=args.threads, refit=args.refit,
+                          join=args.join)
     if args.out:
         from nnfmu.cli.export import check_fmu_options
 
