@@ -262,10 +262,9 @@ def _linear_start(linear_path: str, increment: str | None, ds, model_config, rec
     refit = linear.info.get("refit")
     score = (f"{refit['nrmse_valid_before']:.4f}, then refitted on the training and validation data together" if refit
              else f"{linear.info['nrmse_valid']:.4f}")
-    if linear.info.get("joined"):
-        score = "each split's records joined end to end; " + score
-    print(f"plan: linear path of {linear.n_x} states, the identified linear baseline (validation free-run NRMSE "
-          f"{score}; {time.process_time() - t0:.1f} CPU-s); the network learns a correction to it, starting at "
+    joined = "each split's records joined end to end; " if linear.info.get("joined") else ""
+    print(f"plan: linear path of {linear.n_x} states, the identified linear baseline ({joined}validation free-run "
+          f"NRMSE {score}; {time.process_time() - t0:.1f} CPU-s); the network learns a correction to it, starting at "
           "zero (--linear-path off: the network alone)")
     return linear
 

@@ -70,8 +70,9 @@ def _summary(model, dataset) -> list[str]:
         how += ", among " + ", ".join(f"{n}: {v:.4f}" for n, v in candidates.items()) + " shortly refined"
     sv = ", ".join(f"{v:.3g}" for v in info["singular_values"][:model.n_x + 3])
     joined = info.get("joined")
-    lines = [f"records: the {joined['train']} training and {joined['valid']} validation records joined end to end "
-             "(the dataset says they are consecutive pieces of one recording; --no-join keeps them apart)"] if joined else []
+    lines = [] if not joined else [
+        f"records: the {joined['train']} training and {joined['valid']} validation records joined end to end (the "
+        "dataset says they are consecutive pieces of one recording; --no-join keeps them apart)"]
     lines += [f"order {model.n_x} ({how}); horizon {info['horizon']}; singular values {sv}, ...",
              f"free-run NRMSE on {info['scored_on']}: subspace {info['nrmse_subspace']:.4f}"]
     refinement = info.get("refinement")

@@ -45,9 +45,9 @@ Records that are consecutive pieces of one recording (the dataset's ``source["co
 benchmark's 605-sample pieces, with a valid split of its own and several training records) are joined end to
 end first, each split into one record (``join=True``, the default; ``info["joined"]`` says so), as
 ``nnfmu train`` joins them for its networks: the output-error fit and the order's validation then run over
-the recording's horizon, not 605 samples from each piece's init rule. On the robot this took the validation
-free-run NRMSE over the joined validation record from 0.8208 to 0.7383 (and over its separate pieces from
-0.7547 to 0.7474), at 104 CPU-s against 12 (docs/accuracy.md).
+the recording's horizon, not 605 samples from each piece's init rule. On the robot, before the refit (so
+that validation is unseen), this took the validation free-run NRMSE over the joined validation record from
+0.8624 to 0.7545, and over its separate pieces from 0.7882 to 0.7619, at 62 CPU-s against 9 (docs/accuracy.md).
 
 Every step runs with ``threads`` BLAS threads (default 1, through threadpoolctl). The
 threaded BLAS rounds its sums differently, and 1000 quasi-Newton steps carry that
