@@ -30,7 +30,7 @@ def score(model, records: Trajectories) -> float:
 def main(argv=None) -> int:
     data = Path((argv or sys.argv[1:])[0])
     ds = load_dataset(data)
-    joined = Trajectories((np.concatenate(ds.valid.u),), (np.concatenate(ds.valid.y),))
+    joined = ds.valid.concatenated()
     print("| linear model, no refit | order | valid, joined record | valid, separate pieces | test (reported) | CPU s |")
     print("|---|---:|---:|---:|---:|---:|", flush=True)
     for name, join in (("pieces apart", False), ("joined", True)):

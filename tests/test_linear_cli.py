@@ -149,9 +149,8 @@ def test_consecutive_pieces_of_one_recording_are_identified_joined_as_train_join
     assert main(["linear", "--data", str(data), "--order", "3", "--save", str(tmp_path / "j.json"), "--quiet"]) == 0
     assert "the 6 training and 2 validation records joined end to end" in capsys.readouterr().out
     joined = _pieces_of_one_recording(contiguous=False)
-    one = from_arrays(Ts=0.1, u_train=[np.concatenate(joined.train.u)], y_train=[np.concatenate(joined.train.y)],
-                      u_valid=[np.concatenate(joined.valid.u)], y_valid=[np.concatenate(joined.valid.y)],
-                      u_test=list(joined.test.u), y_test=list(joined.test.y))
+    one = joined.replace(splits={**joined.splits, "train": joined.train.concatenated(),
+                                 "valid": joined.valid.concatenated()})
     assert main(["linear", "--data", str(save_dataset(one, tmp_path / "one")), "--order", "3",
                  "--save", str(tmp_path / "one.json"), "--quiet"]) == 0
     assert main(["linear", "--data", str(data), "--order", "3", "--no-join", "--save", str(tmp_path / "apart.json"),

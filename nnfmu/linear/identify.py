@@ -327,10 +327,8 @@ def consecutive_pieces(dataset: Dataset) -> bool:
 
 def _joined(dataset: Dataset) -> Dataset:
     """``dataset`` with its training and validation splits each joined end to end into one record."""
-    def one(tr: Trajectories) -> Trajectories:
-        return Trajectories((np.concatenate(tr.u),), (np.concatenate(tr.y),))
-
-    return dataset.replace(splits={**dataset.splits, "train": one(dataset.train), "valid": one(dataset.valid)})
+    return dataset.replace(splits={**dataset.splits, "train": dataset.train.concatenated(),
+                                   "valid": dataset.valid.concatenated()})
 
 
 def _identify(dataset: Dataset, config: LinearConfig, progress: bool, refit_on: Trajectories | None) -> LinearModel:

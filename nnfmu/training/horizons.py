@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from nnfmu.data import Dataset, Trajectories
@@ -29,10 +28,6 @@ def join_sequences(seqs: list) -> list:
     return [(torch.cat([u for u, _ in seqs]), torch.cat([y for _, y in seqs]))]
 
 
-def _joined(tr: Trajectories) -> Trajectories:
-    return Trajectories((np.concatenate(tr.u),), (np.concatenate(tr.y),))
-
-
 def validation_trajectories(ds: Dataset, cfg: TrainConfig) -> tuple[Trajectories, list[str]]:
     """The validation free runs of ``ds`` (which has a ``valid`` split) under ``cfg.valid_horizon``, and notes."""
     valid, notes = ds.valid, []
@@ -41,7 +36,7 @@ def validation_trajectories(ds: Dataset, cfg: TrainConfig) -> tuple[Trajectories
         cfg.valid_horizon == "auto" and bool(ds.source.get("contiguous")) and valid.n_traj > 1
         and test_len > int(valid.lengths.max()))
     if join:
-        valid = _joined(valid)
+        valid = valid.concatenated()
         notes.append(f"validating on the {ds.valid.n_traj} validation trajectories joined into one "
                      f"{valid.n_samples}-sample free run (valid_horizon={cfg.valid_horizon})")
     longest = int(valid.lengths.max())
