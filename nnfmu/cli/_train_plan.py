@@ -219,7 +219,9 @@ def prepare(ds, model_config, train_config, given: dict, *, linear_path: str = "
         return ds, model_config, train_config, None
     if data_plan == "budget" and "truncate" not in given:
         given = {**given, "truncate": None}
-        print(f"plan: windows: whole trajectories (a {model_config.arch}'s state starts from y0 at a record's start; "
+        start = (f"its estimator over a record's first {model_config.init_window} samples"
+                 if model_config.init_window > 1 else "y0 at a record's start")
+        print(f"plan: windows: whole trajectories (a {model_config.arch}'s state starts from {start}; "
               "--truncate N cuts windows)")
     init_window = model_config.init_window
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:

@@ -132,9 +132,15 @@ def _with_init_window(model, network, window: int | None):
     from nnfmu.errors import ConfigError
     from nnfmu.physics.initial_state import with_init_window
 
+    trained, hybrid = model.spec.init_window, model.spec.source.get("kind") == "nnfmu-hybrid"
+    if hybrid and trained > 1:  # trained from its estimator's start (nnfmu.hybrid.initial_state): it keeps it
+        if window not in (None, trained):
+            raise ConfigError(f"this hybrid was trained from the state its estimator fits over {trained} samples, "
+                              f"and its FMU takes that window; leave --init-window out (or give {trained})")
+        return model
     if not window or window == 1:
         return model
-    if model.spec.source.get("kind") != "nnfmu-hybrid":
+    if not hybrid:
         raise ConfigError(f"--init-window applies to physics, fits and hybrids; a network's init window is learned "
                           f"in training (nnfmu train --init-window {window}); leave --init-window out of export")
     return with_init_window(model, window, y_scale=network.y_std.detach().double().numpy(),

@@ -48,7 +48,8 @@ _MODEL_OPTIONS = (
     ("--dropout", "dropout", float, "dropout probability on hidden activations (default 0)"),
     ("--init-window", "init_window", int,
      "N: the initial state is estimated from the N measured samples up to t0 (RNN/LSTM/GRU: a learned encoder; "
-     "MLP/TCN: their own window); 1 = from y0 and u0 alone (default 1)"),
+     "MLP/TCN: their own window; hybrid: its FMU's least-squares estimator, in training too); 1 = from y0 and u0 "
+     "alone (default 1)"),
 )
 _TRAIN_OPTIONS = (
     ("--lr", "lr", float, "AdamW learning rate (default 3e-3)"),

@@ -3,7 +3,9 @@
 A :class:`HybridConfig` is a :class:`~nnfmu.models.ModelConfig` with ``arch="hybrid"``, so the
 one trainer, checkpoints and ``load_model`` treat a hybrid like any other network. Of the
 inherited fields, ``hidden``, ``layers`` (default 2), ``activation`` and ``dropout`` shape the
-correction MLP; ``window`` is 1 (the physics state is the memory); ``kernel_size``, ``skip`` and
+correction MLP; ``window`` is 1 (the physics state is the memory); ``init_window`` ``N > 1`` starts
+every free run, in training too, from the state its FMU's estimator fits over the ``N`` samples up to ``y0``
+(:mod:`nnfmu.hybrid.initial_state`; 1: the physics' init rule at ``y0``); ``kernel_size``, ``skip`` and
 ``skip_scale`` do not apply (the physics plays the part of the skip connection).
 
 The physics is a spec that :func:`nnfmu.physics.resolve_physics` understands: a registered name
@@ -34,6 +36,7 @@ from nnfmu.hybrid.compiled_torch import BACKENDS
 from nnfmu.hybrid.parameters import (document_system, document_text, ignorable_states, kinematic_states,
                                      normalise_physics_params, physics_system, registered_defaults)
 from nnfmu.hybrid.parameters import load_physics_params  # noqa: F401  (nnfmu.hybrid exports it from here)
+from nnfmu.limits import MAX_INIT_WINDOW
 from nnfmu.models.config import ACTIVATIONS, ModelConfig
 from nnfmu.physics import PhysicsSystem
 from nnfmu.physics.document import system_to_document
@@ -214,9 +217,13 @@ class HybridConfig(ModelConfig):
             raise ShapeError(f"a hybrid model's memory is its physics state, so window must be 1, got "
                              f"{self.window!r}; leave window out")
         object.__setattr__(self, "window", 1)
-        if self.increment or self.init_window != 1 or self.members != 1:
-            raise ConfigError("a hybrid model starts from its physics state (init_state(y0, u0)) and predicts the "
-                              "physics' output; increment, init_window and members do not apply to it: leave them out")
+        if self.increment or self.members != 1:
+            raise ConfigError("a hybrid model starts from its physics state and predicts the physics' output; "
+                              "increment and members do not apply to it: leave them out")
+        if (isinstance(self.init_window, bool) or not isinstance(self.init_window, int)
+                or not 1 <= self.init_window <= MAX_INIT_WINDOW):
+            raise ShapeError(f"a hybrid's init_window (the samples its estimator fits the start state over) must "
+                             f"be a whole number from 1 to {MAX_INIT_WINDOW:,}, got {self.init_window!r}")
         if not 0.0 <= float(self.dropout) < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout!r}")
         object.__setattr__(self, "dropout", float(self.dropout))

@@ -29,6 +29,7 @@ from nnfmu.export import casadi_layers as nets
 from nnfmu.hybrid.model import HybridStepModel, physics_step
 from nnfmu.identifiers import to_c_identifier
 from nnfmu.physics import rk4_step
+from nnfmu.physics.initial_state import with_init_window
 from nnfmu.system import CasadiModel, ContinuousDynamics, SystemSpec, Variable
 from nnfmu.valid_range import stored_input_variables, with_starts
 
@@ -96,7 +97,8 @@ def verify_hybrid_export(model: HybridStepModel, init: ca.Function, step: ca.Fun
     p = ref.physics_parameters().detach().numpy()
     scale = ref._state_scale.numpy()
     with torch.no_grad():
-        x_t = ref.init(torch.from_numpy(y0)[None], torch.from_numpy(us[0])[None])
+        # the init rule (an init window's estimator is verified with the model it is built on)
+        x_t = ref.init_norm(ref.normalise_y(torch.from_numpy(y0)[None]), ref.normalise_u(torch.from_numpy(us[0])[None]))
         x_c = np.asarray(init(y0, us[0], p)).ravel()
         pairs = [("x0", x_c, x_t[0].numpy(), scale)]
         for k, u_k in enumerate(us):
@@ -113,7 +115,11 @@ def verify_hybrid_export(model: HybridStepModel, init: ca.Function, step: ca.Fun
 
 
 def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> CasadiModel:
-    """The hybrid as a :class:`~nnfmu.system.CasadiModel`; the physical parameters (trained values) are parameters."""
+    """The hybrid as a :class:`~nnfmu.system.CasadiModel`; the physical parameters (trained values) are parameters.
+
+    A hybrid trained with an init window of ``N > 1`` samples (``config.init_window``) gets the estimator it trained
+    with (:func:`~nnfmu.physics.initial_state.with_init_window`): its FMU takes the window as parameters.
+    """
     init, step = hybrid_to_casadi(model)
     meta, prov = model.meta, model.provenance or {}
     spec = SystemSpec(
@@ -130,7 +136,12 @@ def hybrid_casadi_model(model: HybridStepModel, *, name: str | None = None) -> C
                 "best_epoch": prov.get("best_epoch"), "summary": prov.get("summary", {}),
                 "dataset_source": prov.get("dataset_source", meta.get("source", {}))},
     )
-    return CasadiModel(init, step, spec, continuous=hybrid_dynamics(model))
+    exported = CasadiModel(init, step, spec, continuous=hybrid_dynamics(model))
+    if model.config.init_window == 1:
+        return exported
+    # trained from its estimator's start (nnfmu.hybrid.initial_state): the FMU estimates it the same way
+    return with_init_window(exported, model.config.init_window, y_scale=model.y_std.detach().double().numpy(),
+                            x_scale=model.physics.state_scales or None)
 
 
 def hybrid_dynamics(model: HybridStepModel) -> ContinuousDynamics | None:

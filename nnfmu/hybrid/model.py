@@ -47,6 +47,7 @@ from nnfmu.errors import ConfigError, ShapeError
 from nnfmu.hybrid.compiled_torch import casadi_to_torch
 from nnfmu.hybrid.config import HybridConfig
 from nnfmu.hybrid.fused import fused_step, weight_vector
+from nnfmu.hybrid.initial_state import estimate_state
 from nnfmu.hybrid.parameters import document_system, hide_state_inputs, physics_system
 from nnfmu.models.base import StepModel
 from nnfmu.models.activation import activation_module
@@ -249,16 +250,26 @@ class HybridStepModel(StepModel):
         x_next, y_next = self._advance(x, self._denormalise_u(un), un, self.physics_parameters(), self._plan(x.dtype))
         return x_next, self.normalise_y(y_next)
 
-    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
-        """Free run: the same operations as :meth:`step_norm`, with ``p`` and ``u`` computed once."""
-        out = self._free_run_eager(un, yn0)
+    def init_window_norm(self, yn_win: torch.Tensor, un_win: torch.Tensor) -> torch.Tensor:
+        """The state at the window's newest sample (B, n_x): with ``init_window = N > 1``, its FMU's estimator over
+        the window (B, N, n_y), (B, N, n_u) (:mod:`nnfmu.hybrid.initial_state`), else the init rule."""
+        if self.config.init_window == 1:
+            return self.init_norm(yn_win[:, -1], un_win[:, -1])
+        return estimate_state(self, yn_win, un_win)
+
+    def free_run_norm(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
+        """Free run: the same operations as :meth:`step_norm`, with ``p`` and ``u`` computed once; from ``x0``
+        (B, n_x; default the init rule at ``yn0``)."""
+        out = self._free_run_eager(un, yn0, x0)
         self._check_finite(out)
         return out
 
-    def _free_run_eager(self, un: torch.Tensor, yn0: torch.Tensor) -> torch.Tensor:
+    def _free_run_eager(self, un: torch.Tensor, yn0: torch.Tensor, x0: torch.Tensor | None = None) -> torch.Tensor:
         """:meth:`free_run_norm` without the check (what :mod:`nnfmu.hybrid.graphed` records on a GPU)."""
         p, u, plan = self.physics_parameters(), self._denormalise_u(un), self._plan(yn0.dtype, fused_batch=yn0.shape[0])
-        x = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0].to(yn0.dtype)
+        if x0 is None:
+            x0 = self._bridge.init_state(self.denormalise_y(yn0), u[:, 0], p)[0]
+        x = x0.to(yn0.dtype)
         ys = [yn0]
         for k in range(un.shape[1] - 1):
             x, y = self._advance(x, u[:, k], un[:, k], p, plan)

@@ -36,19 +36,19 @@ from nnfmu.limits import MAX_INIT_WINDOW
 from nnfmu.physics.rk4 import rk4_step
 from nnfmu.system import CasadiModel
 
-__all__ = ["with_init_window", "window_estimator", "estimating_model", "compact_step", "ITERATIONS"]
+__all__ = ["with_init_window", "window_estimator", "lm_estimator", "estimating_model", "compact_step", "ITERATIONS"]
 
 #: Levenberg-Marquardt steps unrolled into ``init``: on the two tanks, noise-free, 10 took the upper level to
 #: the true one within 1e-9 from the steady-state guess (tests/test_physics_init_window.py).
 ITERATIONS = 10
 _LAM0, _LAM_MIN, _LAM_MAX, _DELTA = 1e-2, 1e-9, 1e9, 1e-6
-_FINITE = 1e300  # larger magnitudes count as not finite (the costs are squares: 1e300 is already absurd)
+FINITE_LIMIT = 1e300  # larger magnitudes count as not finite (the costs are squares: 1e300 is already absurd)
 
 
 def _finite(expr):
     """1 where every entry of ``expr`` is finite, else 0: a sum carries NaN (``fmax`` would drop it), and NaN
     fails every comparison."""
-    return ca.sum1(ca.fabs(ca.vec(expr))) <= _FINITE
+    return ca.sum1(ca.fabs(ca.vec(expr))) <= FINITE_LIMIT
 
 
 def _damped_step(n_x: int) -> ca.Function:
@@ -72,15 +72,25 @@ def window_estimator(model: CasadiModel, window: int, *, y_scale=None, x_scale=N
     otherwise, with its ports (default ``model.step``), e.g. so that its derivative's C code stays small
     (:func:`estimating_model`).
     """
-    spec, n_x, n = model.spec, model.n_x, window - 1
-    step = model.step if step is None else step
-    y_scale = np.ones(spec.n_y) if y_scale is None else np.asarray(y_scale, dtype=float).ravel()
+    return lm_estimator(model.init, model.step if step is None else step, window, y_scale=y_scale,
+                        x_scale=x_scale, iterations=iterations)
+
+
+def lm_estimator(init: ca.Function, step: ca.Function, window: int, *, y_scale=None, x_scale=None,
+                 iterations: int = ITERATIONS) -> ca.Function:
+    """:func:`window_estimator` of the pair ``init(y0, u0[, p]) -> x0``, ``step(x, u[, p]) -> (x_next, y_next)``,
+    whose sizes (``n_x``, ``n_u``, ``n_p``, ``n_y``) are read from ``step``'s ports; ``p`` may be any vector both
+    take (a hybrid in training passes its physical parameters and its network's weights, :mod:`nnfmu.hybrid.window`).
+    """
+    n_x, n_u, n_y = step.size1_in(0), step.size1_in(1), step.size1_out(1)
+    n_p, n = (step.size1_in(2) if step.n_in() > 2 else 0), window - 1
+    y_scale = np.ones(n_y) if y_scale is None else np.asarray(y_scale, dtype=float).ravel()
     x_scale = np.ones(n_x) if x_scale is None else np.asarray(x_scale, dtype=float).ravel()
-    if y_scale.shape != (spec.n_y,) or x_scale.shape != (n_x,) or not (np.all(y_scale > 0) and np.all(x_scale > 0)):
-        raise ShapeError(f"y_scale and x_scale must be {spec.n_y} and {n_x} positive numbers, got "
+    if y_scale.shape != (n_y,) or x_scale.shape != (n_x,) or not (np.all(y_scale > 0) and np.all(x_scale > 0)):
+        raise ShapeError(f"y_scale and x_scale must be {n_y} and {n_x} positive numbers, got "
                          f"{y_scale.tolist()} and {x_scale.tolist()}")
-    Y, U = ca.MX.sym("y_win", spec.n_y, window), ca.MX.sym("u_win", spec.n_u, n)
-    p = [ca.MX.sym("p", spec.n_p)] if spec.n_p else []
+    Y, U = ca.MX.sym("y_win", n_y, window), ca.MX.sym("u_win", n_u, n)
+    p = [ca.MX.sym("p", n_p)] if n_p else []
     z = ca.MX.sym("z", n_x)
     _, Yhat = step.mapaccum("window_run", n, [0], [0])(z * x_scale, U, *(ca.repmat(q, 1, n) for q in p))
     r = ca.vec((Yhat - Y[:, 1:]) / ca.repmat(ca.DM(y_scale), 1, n))
@@ -90,7 +100,7 @@ def window_estimator(model: CasadiModel, window: int, *, y_scale=None, x_scale=N
     # cut the arm's estimator C from 2.7 to 0.54 MB (gcc 138 -> 88 s) but ran 2.9 times slower (valve, VM)
     linearised = ca.Function("window_jacobian", ins, [r, ca.jacobian(r, z)], names, ["r", "J"])
     damped = _damped_step(n_x)
-    zk = model.init(Y[:, 0], U[:, 0], *p) / x_scale
+    zk = init(Y[:, 0], U[:, 0], *p) / x_scale
     cost, lam = 0.5 * ca.sumsqr(residuals(zk, Y, U, *p)), ca.MX(_LAM0)
     for _ in range(iterations):
         rk, J = linearised(zk, Y, U, *p)
