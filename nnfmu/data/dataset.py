@@ -276,6 +276,15 @@ class Dataset:
     def valid(self) -> Trajectories | None:
         return self.splits.get("valid")
 
+    @property
+    def consecutive_pieces(self) -> bool:
+        """Whether the records are consecutive pieces of one recording that training joins end to end: the
+        dataset says so (``source["contiguous"]``, as the robot benchmark's 605-sample pieces), it has a valid split
+        of its own (pieces carved out for validation would leave gaps at the seams), and its training split has
+        several records. The one rule of the networks' windows (:func:`nnfmu.training.plan.plan_training`) and the
+        linear identification (:func:`nnfmu.linear.identify_linear`)."""
+        return bool(self.source.get("contiguous")) and self.valid is not None and self.train.n_traj > 1
+
     def replace(self, **changes) -> "Dataset":
         return dataclasses.replace(self, **changes)
 

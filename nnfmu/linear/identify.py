@@ -318,13 +318,6 @@ def _refit(data: Trajectories, scaling: _Scaling, order: int, evaluations: int, 
     return result.system
 
 
-def consecutive_pieces(dataset: Dataset) -> bool:
-    """Whether ``dataset``'s records are consecutive pieces of one recording that its training joins: the
-    dataset says so (``source["contiguous"]``), it has a valid split, and its training split has several records
-    (the rule of :func:`nnfmu.training.plan.plan_training`)."""
-    return bool(dataset.source.get("contiguous")) and dataset.valid is not None and dataset.train.n_traj > 1
-
-
 def _joined(dataset: Dataset) -> Dataset:
     """``dataset`` with its training and validation splits each joined end to end into one record."""
     return dataset.replace(splits={**dataset.splits, "train": dataset.train.concatenated(),
@@ -333,7 +326,7 @@ def _joined(dataset: Dataset) -> Dataset:
 
 def _identify(dataset: Dataset, config: LinearConfig, progress: bool, refit_on: Trajectories | None) -> LinearModel:
     joined = None
-    if config.join and consecutive_pieces(dataset):
+    if config.join and dataset.consecutive_pieces:
         joined = {"train": int(dataset.train.n_traj), "valid": int(dataset.valid.n_traj)}
         dataset = _joined(dataset)
     st = dataset.norm_stats("train")

@@ -89,8 +89,6 @@ def validation_line(ds: Dataset, frac: float, blocks: int = 1) -> str:
 
 def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1) -> Plan:
     """The data-driven choices for the TrainConfig fields not in ``given`` (field -> value the user gave)."""
-    from nnfmu.linear.identify import consecutive_pieces  # here: it imports CasADi and SciPy
-
     changes, lines = {}, []
     if "valid_fraction" not in given and (frac := valid_fraction(ds, init_window)) is not None:
         changes["valid_fraction"] = frac
@@ -98,7 +96,7 @@ def plan_training(ds: Dataset, given: dict, *, linear=None, init_window: int = 1
     lengths = np.asarray(ds.train.lengths, dtype=float) * (1.0 - changes.get("valid_fraction", 0.0))
     whole = "truncate" in given and given["truncate"] is None  # whole trajectories asked for (a hybrid's plan)
     # joined only with a valid split of its own: validation pieces carved at random would leave gaps at the seams
-    if "join" not in given and not whole and consecutive_pieces(ds):  # the linear identification joins them too
+    if "join" not in given and not whole and ds.consecutive_pieces:  # the linear identification joins them too
         changes["join"] = True
         lines.append(f"records: the {len(lengths)} training records joined end to end (the dataset says they are "
                      "consecutive pieces of one recording; --no-join keeps them apart)")
