@@ -61,11 +61,17 @@ def fused_step(model, batch: int) -> CompiledFunction | None:
         return None
     if not unrolled(model) and torch.is_grad_enabled() and batch > LOOPED_MAX_BATCH:
         return None
-    key = (config.physics_key(), config.correction, model.Ts, model.n_sub, config.n_u, _layout(modules),
-           tuple(model._state_scale.tolist()), tuple(model._scatter.reshape(-1).tolist()))
+    key = structure_key(model)
     if key not in _COMPILED:  # one compiled step per layout: the model supplies the structure, not the weights
         _COMPILED[key] = _compile(model)
     return _COMPILED[key]
+
+
+def structure_key(model) -> tuple:
+    """What :func:`step_function`'s graph depends on besides the weights and the physical parameters (a cache key)."""
+    config = model.config
+    return (config.physics_key(), config.correction, model.Ts, model.n_sub, config.n_u, _layout(_modules(model)),
+            tuple(model._state_scale.tolist()), tuple(model._scatter.reshape(-1).tolist()))
 
 
 def weight_vector(model) -> torch.Tensor:
