@@ -102,12 +102,13 @@ def test_sigint_keeps_the_best_checkpoint_and_resume_finishes(valve_tiny, tmp_pa
         if epoch == 2:
             os.kill(os.getpid(), signal.SIGINT)  # like Ctrl-C while epoch 3 runs
 
+    before = signal.getsignal(signal.SIGINT)  # Python's default, or one an earlier test's Ray Tune left
     result = train(valve_tiny, config, TrainConfig(**{**FAST, "epochs": 5}), out=out,
                    callback=interrupt_after_epoch_2)
     assert result.stop_reason == "SIGINT" and result.test is None
     ckpt = load_checkpoint(out)
     assert ckpt["resume"]["epoch"] == 2 and ckpt["best_epoch"] == result.best_epoch <= 2
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+    assert signal.getsignal(signal.SIGINT) is before  # the handler there before is restored
     resumed = train(valve_tiny, config, None, out=out, resume=True)
     assert resumed.stop_reason == "epochs" and [h["epoch"] for h in resumed.history] == list(range(6))
 
