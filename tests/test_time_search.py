@@ -193,7 +193,7 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     """A real search on a tiny linear system, its space cut to three points (the learning rate) so that it ends
     when they do: trial 0 is the plain training trained to its own stop (its epochs), the same numbers as train()
     gives, not stopped by the halving; the kept model is at or below it on validation; the table reports the trials'
-    CPU time and share."""
+    CPU time and share; ``keep_trials`` keeps every trial's checkpoint."""
     from nnfmu.study import time_search
     from nnfmu.training import train as train_network
 
@@ -206,7 +206,7 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     real_search = time_search.search_for
 
     def recorded_search(*a, **k):
-        results.append(real_search(*a, cpus=2, **k))
+        results.append(real_search(*a, cpus=2, keep_trials=tmp_path / "trials", **k))
         return results[-1]
 
     out = tmp_path / "kept.pt"
@@ -227,6 +227,8 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     ckpt = load_checkpoint(out)
     assert ckpt["summary"]["best_valid_nrmse"] == result.best_valid_nrmse
     assert ckpt["summary"]["search"]["trials"] == 3 and ckpt["summary"]["test_nrmse"] == pytest.approx(result.test.mean)
+    kept_trials = {p.name: load_checkpoint(p)["summary"]["best_valid_nrmse"] for p in (tmp_path / "trials").iterdir()}
+    assert kept_trials == {f"trial-{r['trial']}.pt": r["best_valid_nrmse"] for r in rows}  # for offline comparisons
     usage = result.usage
     assert usage["cores"] == 2 and usage["cpu_s"] == pytest.approx(sum(r["cpu_s"] for r in rows))
     assert 0 < usage["cpu_share"] == pytest.approx(usage["cpu_s"] / (2 * usage["wall_s"]))
@@ -316,3 +318,57 @@ def test_the_search_keeps_an_ensemble_of_trials_only_when_it_beats_the_best_on_v
     alone = _keep(rows, tmp_path, ds, tmp_path / "kept.pt", deadline=time.monotonic() + 600)
     assert alone.members == (0,) and alone.best_valid_nrmse == 0.5 and "lowered" in alone.selection
     assert "member_configs" not in load_checkpoint(tmp_path / "kept.pt")["model_config"]  # as any one network's
+
+
+def _trials_on_disk(tmp_path, ds, linear, trials: list) -> list:
+    """Checkpoints ``trial-<i>.pt`` of ``(arch, output offset, halved)`` each, and their rows with their real
+    validation free-run NRMSE (as their trainings would have kept it)."""
+    import torch
+
+    from nnfmu.models import save_checkpoint
+    from nnfmu.training.ensemble_select import ensemble_score
+    from tests.test_linear_path import path_model
+
+    rows = []
+    for i, (arch, shift, halved) in enumerate(trials):
+        model = path_model(arch, ds, linear)
+        with torch.no_grad():
+            model.lin_d.add_(shift)
+        score = ensemble_score([model], ds.valid)[1]
+        save_checkpoint(tmp_path / f"trial-{i}.pt", model, train_config=TrainConfig().to_dict(), best_epoch=5,
+                        summary={"best_valid_nrmse": score, "epochs_run": 9})
+        rows.append({"trial": i, "arch": arch, "hidden": 8, "lr": 3e-3, "feedback_noise": 0.0, "truncate": None,
+                     "seed": i, "epochs": 9, "best_valid_nrmse": score, "stopped": halved, "cpu_s": 1.0,
+                     "status": "time-budget", "error": None})
+    return rows
+
+
+def test_the_search_keeps_the_seeds_of_the_point_best_on_their_mean_not_the_luckiest_trial(tmp_path, capsys):
+    """Two points with two seeds each: the MLP's seeds are the best trial of all (offset 0.05) and a poor one (0.9),
+    the GRU's two are middling (+0.3, -0.32) and better on their mean. The kept model is the GRU's seeds joined,
+    not the luckiest trial; a halved trial is no seed of its point; and where the point's ensemble would be worse
+    on validation than trial 0, the defaults, the search keeps the greedy selection over its best trials."""
+    from nnfmu.linear import identify_linear
+    from nnfmu.study.time_search import _keep
+
+    ds = dataset(true_system(), noise=0.01)
+    linear = identify_linear(ds)
+    rows = _trials_on_disk(tmp_path, ds, linear, [("gru", 0.3, False), ("mlp", 0.05, False), ("gru", -0.32, False),
+                                                   ("mlp", 0.9, False), ("mlp", 0.04, True)])
+    score = {r["trial"]: r["best_valid_nrmse"] for r in rows}
+    assert min(score, key=score.get) == 4 and sorted(score, key=score.get)[1] == 1  # the luckiest: halved, then 1
+    assert (score[0] + score[2]) / 2 < (score[1] + score[3]) / 2  # the GRU point is the better on its mean
+    kept = _keep(rows, tmp_path, ds, tmp_path / "kept.pt", deadline=time.monotonic() + 600)
+    assert kept.best == 4 and kept.members == (0, 2) and kept.member_scores[-1] < score[1]
+    assert "seeds of the point best on their mean" in kept.selection and "gru h8" in kept.selection
+    summary = load_checkpoint(tmp_path / "kept.pt")["summary"]
+    assert summary["search"]["members"] == [0, 2] and summary["best_valid_nrmse"] == kept.member_scores[-1]
+
+    # the GRU's seeds both off the same way: the best of them is above trial 0 (a TCN) on validation -> the greedy
+    # selection over the best trials, from the best one
+    rows = _trials_on_disk(tmp_path, ds, linear, [("tcn", 0.1, False), ("mlp", 0.05, False), ("gru", 0.3, False),
+                                                  ("mlp", 0.9, False), ("gru", 0.35, False)])
+    score = {r["trial"]: r["best_valid_nrmse"] for r in rows}
+    assert (score[2] + score[4]) / 2 < (score[1] + score[3]) / 2 and score[0] < score[2]
+    kept = _keep(rows, tmp_path, ds, tmp_path / "kept.pt", deadline=time.monotonic() + 600)
+    assert kept.best == 1 and kept.members[0] == 1 and "seeds of the point" not in kept.selection

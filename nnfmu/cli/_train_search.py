@@ -69,13 +69,13 @@ def run_search(plan) -> int:
         scores = ", ".join(f"{v:.4f}" for v in result.member_scores)
         print(f"kept an ensemble of trials {', '.join(map(str, result.members))} (the mean output fed back, one "
               f"model): validation free-run NRMSE {result.best_valid_nrmse:.4f} (as each joined: {scores}; "
-              f"stopped: {result.selection}); checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)")
+              f"{result.selection}); checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)")
     else:
-        kept = result.rows[result.best]
-        print(f"kept trial {result.best} ({kept['arch']}, hidden {kept['hidden']}, lr {kept['lr']:g}, feedback "
+        kept = result.rows[result.members[0]]
+        print(f"kept trial {kept['trial']} ({kept['arch']}, hidden {kept['hidden']}, lr {kept['lr']:g}, feedback "
               f"noise {kept['feedback_noise']:g}, {_window(kept['truncate'])}): validation free-run NRMSE "
               f"{result.best_valid_nrmse:.4f}; checkpoint {out} ({len(result.rows)} trials in {result.seconds:.0f} s)"
-              + (f"; no ensemble: {result.selection}" if result.selection else ""))
+              + (f"; alone: {result.selection}" if result.selection else ""))
     if result.test is None:
         print("test free-run NRMSE: n/a (no test split, or the free run diverged)")
         return 0
@@ -115,9 +115,9 @@ def print_table(rows: list, kept=(), usage: dict | None = None) -> None:
         print("  ".join(cell.rjust(w) if j else cell.ljust(w) for j, (cell, w) in enumerate(zip(row, widths)))
               + "  " + row[-1])
     if len(kept) == 1:
-        print("* kept: the lowest validation free-run NRMSE")
+        print("* kept: chosen on validation (below: why)")
     elif kept:
-        print("* kept: their ensemble, chosen greedily on validation from the best trial on")
+        print("* kept: their ensemble, chosen greedily on validation (below: from which trials)")
     if usage:
         waited = ("" if usage.get("waited_s") is None else
                   f"; the workers spent {usage['workers_cpu_s'] - usage['cpu_s']:.0f} CPU-s besides (start, imports) "

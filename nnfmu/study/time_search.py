@@ -20,12 +20,15 @@ the defaults it starts from. The whole search ends within the budget:
   (:func:`~nnfmu.study.time_space.again`), trained to its own stop too; a trial stops after an epoch when the next
   would end past the trials' end.
 
-The trials validate on the validation split only (the test split stays in the driver). The trial with the
-lowest best validation NRMSE kept in its checkpoint starts a greedy ensemble selection on validation
-(:func:`nnfmu.training.ensemble_select.select_ensemble`) over the :data:`MAX_CANDIDATES` best trials that
-improved on their start: another trial joins as a member of one model (the mean output fed back) only if it
-lowers the validation free-run NRMSE by 1 % or more, up to 4 members. The kept model (one trial's network, or the
-mixed ensemble of several), with its test scores added, is written atomically to ``out``. Nothing is written to
+The trials validate on the validation split only (the test split stays in the driver). At the end a greedy
+ensemble selection on validation (:func:`nnfmu.training.ensemble_select.select_ensemble`) keeps one model: another
+trial joins as a member (the mean output fed back) only if it lowers the validation free-run NRMSE by 1 % or more,
+up to 4 members. Its candidates are the seeds of the point best on the mean of its seeds (:func:`_best_point`),
+where a point has :data:`MIN_SEEDS` or more and their ensemble is at or below trial 0 on validation; otherwise the
+:data:`MAX_CANDIDATES` best trials that improved on their start, from the best. The mean, not the best draw, ranks
+a point: ``benchmarks/search_selection.py`` chose it one level down, without the test split (docs/accuracy.md,
+"Which trials a search keeps"). The kept model (one trial's network, or the ensemble of several), with its test
+scores added, is written atomically to ``out``. Nothing is written to
 ``out`` unless a trial finished an epoch. The result says how much of the CPU the trials used (their CPU seconds
 over cores x the search's wall time) and when its best validation score last fell.
 """
@@ -43,7 +46,7 @@ from pathlib import Path
 from nnfmu.data import Dataset, save_dataset
 from nnfmu.errors import ConfigError
 from nnfmu.limits import UNBOUNDED_EPOCHS
-from nnfmu.study.time_space import again, label, trial_configs, trial_points
+from nnfmu.study.time_space import KNOBS, again, label, trial_configs, trial_points
 from nnfmu.study.trial_pool import Halving, Trials, run_trials
 from nnfmu.training import TrainConfig
 from nnfmu.training.ensemble_select import MAX_MEMBERS
@@ -59,6 +62,7 @@ SELECT_SHARE = 0.1  # of the budget, at most, kept for the ensemble selection af
 MIN_SELECT_S = 2.0
 SELECT_SAFETY = 3.0  # an ensemble's free run is in torch, a trial's validation often compiled
 MAX_CANDIDATES = 6  # the best trials on validation that the selection tries
+MIN_SEEDS = 2  # seeds of one point before the mean of their validation scores ranks it
 #: validation free runs of one member the selection makes at most: the best alone, then each round tries every
 #: candidate left as one more member of the ensemble so far
 SELECT_RUNS = 1 + sum((MAX_CANDIDATES - r) * (r + 1) for r in range(1, MAX_MEMBERS))
@@ -71,10 +75,11 @@ class TimeSearchResult:
     A row: ``trial``, the knobs (``arch``, ``hidden``, ``lr``, ``feedback_noise``, ``truncate``), ``epochs``
     (run), ``best_valid_nrmse`` (kept in its checkpoint; None if it never finished an epoch), ``stopped``
     (by successive halving), ``cpu_s`` (CPU seconds of its training), ``status`` (how it ended) and ``error``.
-    ``best``: the trial best on validation; ``members``: the trials of the kept model (``(best,)``, or the
-    ensemble's, in the order the selection added them) and ``member_scores`` the validation NRMSE after each
-    addition; ``best_valid_nrmse``: the kept model's. ``test`` and ``test_window``: the kept model's free-run test
-    scores (:class:`~nnfmu.metrics.NrmseResult` or None), as :class:`~nnfmu.training.TrainResult` has them;
+    ``best``: the trial best on validation; ``members``: the trials of the kept model (one, or the ensemble's, in
+    the order the selection added them; the seeds of the best point need not include ``best``) and
+    ``member_scores`` the validation NRMSE after each addition; ``best_valid_nrmse``: the kept model's. ``test``
+    and ``test_window``: the kept model's free-run test scores (:class:`~nnfmu.metrics.NrmseResult` or None), as
+    :class:`~nnfmu.training.TrainResult` has them;
     ``model_config`` and ``train_config``: the kept model's, as its checkpoint holds them (dicts).
     ``usage``: ``cpu_s`` (the trials' CPU seconds), ``cores``, ``wall_s`` (from the call to the end),
     ``cpu_share`` (``cpu_s / (cores * wall_s)``) and ``load`` (the machine's 5-minute load average at the end:
@@ -101,8 +106,8 @@ class TimeSearchResult:
 
 def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: TrainConfig, linear=None,
                out, given=(), seed: int = 0, progress: bool = True, cpus: int | None = None,
-               since: float | None = None) -> TimeSearchResult:
-    """Spend ``minutes`` on the search (module docstring); the best trial's checkpoint is written to ``out``.
+               since: float | None = None, keep_trials: Path | None = None) -> TimeSearchResult:
+    """Spend ``minutes`` on the search (module docstring); the kept model's checkpoint is written to ``out``.
 
     ``dataset`` has its validation split; ``model_config`` is the base network (its ``arch`` is trial 0's and is
     searched unless ``"arch"`` is in ``given``; None: the first architecture of the search order,
@@ -112,7 +117,9 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     the linear model of the linear path (or None), ``given`` the names of the options the user gave (kept as given).
     Ctrl-C, SIGTERM or an error during the search still writes the best finished trial to ``out``, then goes on.
     ``since``: the :func:`time.monotonic` time the budget counts from (default: now; the CLI passes its start).
-    ``cpus``: worker processes (default: the cores this process may use).
+    ``cpus``: worker processes (default: the cores this process may use). ``keep_trials``: a folder to copy every
+    trial's checkpoint into (``trial-<i>.pt``), for comparing selection rules offline
+    (``benchmarks/search_selection.py``); by default they go with the search's temporary folder.
     """
     called = time.monotonic()
     started = called if since is None else since
@@ -152,6 +159,8 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
             stopped_by = exc
         rows = [_row(i, run[i], folder, trials.records.get(i, {}), i in halving.stopped)
                 for i in range(trials.started)]
+        if keep_trials is not None:
+            _copy_trials(folder, Path(keep_trials))
         kept = _keep(rows, folder, dataset, out, None if stopped_by is not None else final - reserve / 2)
         if stopped_by is not None:
             if kept is not None:
@@ -200,6 +209,15 @@ class _Jobs:
                                                           f"{record['last']['epoch']} epochs")
         stopped = ", stopped by successive halving" if i in self.halving.stopped else ""
         print(f"search: trial {i} {label(self.run[i])}: {text}{stopped}", flush=True)
+
+
+def _copy_trials(folder: Path, to: Path) -> None:
+    """Copy the trials' checkpoints from the search's folder into ``to`` (made if missing)."""
+    import shutil
+
+    to.mkdir(parents=True, exist_ok=True)
+    for ckpt in folder.glob("trial-*.pt"):
+        shutil.copy2(ckpt, to / ckpt.name)
 
 
 def _budgeted(cfg: TrainConfig, steps: int, grace: int) -> TrainConfig:
@@ -331,11 +349,12 @@ def _keep(rows: list, folder: Path, dataset: Dataset, out: Path, deadline: float
     model, members, scores, why = model_from_checkpoint(ckpt), (best,), (scored[0]["best_valid_nrmse"],), ""
     if deadline is not None:
         model, members, scores, why = _select(scored, folder, dataset, ckpt, model, deadline)
-        if len(members) == 1:  # the trial alone: its score as its training kept it, the table's
-            scores = (scored[0]["best_valid_nrmse"],)
+        if len(members) == 1:  # one trial alone: its checkpoint, and its score as its training kept it, the table's
+            ckpt = ckpt if members[0] == best else load_checkpoint(folder / f"trial-{members[0]}.pt")
+            scores = (next(r["best_valid_nrmse"] for r in scored if r["trial"] == members[0]),)
     test, window = _test_scores(model, dataset)
-    search = {"trials": len(rows), "kept": best, "members": list(members), "member_valid_nrmse": list(scores),
-              "selection": why}
+    search = {"trials": len(rows), "best": best, "kept": members[0], "members": list(members),
+              "member_valid_nrmse": list(scores), "selection": why}
     if len(members) > 1:
         summary = {"best_valid_nrmse": scores[-1], "stop_reason": "search", "search": search,
                    "notes": [f"an ensemble of trials {', '.join(map(str, members))} of the time-budget search, "
@@ -356,30 +375,80 @@ def _keep(rows: list, folder: Path, dataset: Dataset, out: Path, deadline: float
 
 
 def _select(scored: list, folder: Path, dataset: Dataset, ckpt: dict, model, deadline: float) -> tuple:
-    """``(model, member trials, validation NRMSE after each, why it ended)`` of the greedy selection.
+    """``(model, member trials, validation NRMSE after each, why it ended)``: the seeds of the best point, or the
+    greedy selection over the best trials.
 
-    The candidates: the best trial and the next best that improved on their start (best epoch > 0), up to
-    :data:`MAX_CANDIDATES`. The selection stops early enough to score the kept model on the test split by
-    ``deadline``.
+    The best point (:func:`_best_point`): the one whose seeds have the lowest mean validation NRMSE, among points
+    with :data:`MIN_SEEDS` seeds or more; its seeds (up to :data:`MAX_MEMBERS`, the best first) are joined greedily,
+    each only where it lowers the validation NRMSE by 1 %, and the ensemble is kept where it is at or below trial 0,
+    the defaults, on validation. Otherwise (no such point, as in a search too short to train further seeds): the
+    best trial and the next best that improved on their start, up to :data:`MAX_CANDIDATES`, joined greedily. The
+    selection stops early enough to score the kept model on the test split by ``deadline``.
     """
+    point = _best_point(scored)
+    if point is not None:
+        trials, models = _candidates(point[1], folder, MAX_MEMBERS)
+        if len(trials) >= MIN_SEEDS:
+            kept = _greedy(trials, models, dataset, ckpt, deadline)
+            zero = next((r["best_valid_nrmse"] for r in scored if r["trial"] == 0), math.inf)
+            if kept[2][-1] <= zero:
+                knobs = label({k: point[1][0][k] for k in KNOBS})
+                return kept[:3] + (f"the seeds of the point best on their mean validation NRMSE ({knobs}: "
+                                   f"{point[0]:.4f} over {len(point[1])} seeds), joined greedily: {kept[3]}",)
+    trials, models = _candidates(scored, folder, MAX_CANDIDATES, first=model)
+    if len(models) == 1:
+        return model, tuple(trials), (scored[0]["best_valid_nrmse"],), "no other trial improved on its start"
+    kept = _greedy(trials, models, dataset, ckpt, deadline)
+    return kept[:3] + (f"the best trials joined greedily from the best: {kept[3]}",)
+
+
+def _best_point(scored: list) -> tuple | None:
+    """``(mean validation NRMSE, its trials' rows best first)`` of the point whose seeds score best on average.
+
+    A point's seeds: its trials (the same knobs, :data:`~nnfmu.study.time_space.KNOBS`) that finished an epoch and
+    that successive halving did not stop; a point needs :data:`MIN_SEEDS` of them (the search trains further seeds
+    of its best points once every point has started). The mean, not the best seed, ranks the points: a search
+    that keeps the best of many seeds keeps the luckiest on validation (docs/accuracy.md, "Which trials a search
+    keeps"). None when no point has enough seeds.
+    """
+    seeds: dict = {}
+    for r in scored:
+        if not r["stopped"]:
+            seeds.setdefault(tuple(r[k] for k in KNOBS), []).append(r)
+    means = [(sum(r["best_valid_nrmse"] for r in rows) / len(rows), rows) for rows in seeds.values()
+             if len(rows) >= MIN_SEEDS]
+    if not means:
+        return None
+    mean, rows = min(means, key=lambda m: (m[0], m[1][0]["trial"]))
+    return mean, sorted(rows, key=lambda r: (r["best_valid_nrmse"], r["trial"]))
+
+
+def _candidates(rows: list, folder: Path, limit: int, first=None) -> tuple[list, list]:
+    """``(trials, models)``: of ``rows`` (best first), up to ``limit`` that improved on their start (best epoch
+    > 0); ``first``: ``rows[0]``'s model, already loaded, taken whatever its best epoch."""
     from nnfmu.models import load_checkpoint, model_from_checkpoint
+
+    trials, models = ([rows[0]["trial"]], [first]) if first is not None else ([], [])
+    for r in rows[len(trials):]:
+        if len(trials) == limit:
+            break
+        ckpt = load_checkpoint(folder / f"trial-{r['trial']}.pt")
+        if (ckpt.get("best_epoch") or 0) > 0:
+            trials.append(r["trial"])
+            models.append(model_from_checkpoint(ckpt))
+    return trials, models
+
+
+def _greedy(trials: list, models: list, dataset: Dataset, ckpt: dict, deadline: float) -> tuple:
+    """The greedy ensemble of ``models`` (``trials``' networks, best first) on the validation free runs."""
     from nnfmu.training.ensemble_select import select_ensemble
     from nnfmu.training.horizons import validation_trajectories
 
-    trials, models = [scored[0]["trial"]], [model]
-    for r in scored[1:]:
-        if len(trials) == MAX_CANDIDATES:
-            break
-        other = load_checkpoint(folder / f"trial-{r['trial']}.pt")
-        if (other.get("best_epoch") or 0) > 0:
-            trials.append(r["trial"])
-            models.append(model_from_checkpoint(other))
-    if len(models) == 1:
-        return model, tuple(trials), (scored[0]["best_valid_nrmse"],), "no other trial improved on its start"
     valid, _ = validation_trajectories(dataset, TrainConfig.from_dict(ckpt["train_config"]))
     test_share = dataset.test.n_samples / valid.n_samples if "test" in dataset.splits else 0.0
+    context = models[0].config.init_window
     # then the test's free runs (one; two with an init window), in float64: about twice a validation run's cost
-    selection = select_ensemble(models, valid, context=model.config.init_window, deadline=deadline,
-                                after=2.0 * (2 if model.config.init_window > 1 else 1) * test_share)
+    selection = select_ensemble(models, valid, context=context, deadline=deadline,
+                                after=2.0 * (2 if context > 1 else 1) * test_share)
     return (selection.model, tuple(trials[i] for i in selection.chosen), tuple(selection.scores),
             selection.stopped)
