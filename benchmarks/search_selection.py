@@ -18,12 +18,13 @@ without reading the test split, as ``benchmarks/linear_refit.py`` and ``network_
 The rules, each using the inner validation only:
 
 - ``best``: the trial with the lowest inner validation NRMSE;
-- ``greedy`` (the search's rule today): from the best trial, the greedy ensemble of the 6 best trials that improved
+- ``greedy`` (the search's rule before): from the best trial, the greedy ensemble of the 6 best trials that improved
   on their start, a member joining only where it lowers the inner NRMSE by 1 %;
 - ``point mean``: the point (architecture, width, rate, noise, windows) whose seeds that trained to their own stop
   have the lowest mean inner NRMSE, among points with at least two such seeds, and the ensemble of its (up to 4)
   best seeds, every one of them, not chosen greedily;
-- ``point greedy``: the same point, its seeds joined greedily as ``greedy`` does.
+- ``point greedy`` (the search's rule now, where a point has two seeds; it also prints what the search kept):
+  the same point, its seeds joined greedily as ``greedy`` does.
 
 It prints each rule's inner and outer NRMSE, the best trial on the outer validation (which no rule can know), trial
 0 (the defaults), and the Spearman correlation of inner against outer over the trials that trained to their own stop.
@@ -103,10 +104,12 @@ def compare(path: Path, minutes: float, work: Path) -> None:
     inner_valid = _inner_valid(plan)
     context = plan.model_config.init_window
     rows = [r for r in result.rows if r["best_valid_nrmse"] is not None]
-    models, outer_of = {}, {}
+    models, outer_of, improved = {}, {}, set()
     for r in rows:
         ckpt = load_checkpoint(work / "trials" / f"trial-{r['trial']}.pt")
-        if (ckpt.get("best_epoch") or 0) > 0 or r["trial"] == 0:
+        if (ckpt.get("best_epoch") or 0) > 0:
+            improved.add(r["trial"])
+        if r["trial"] in improved or r["trial"] == 0:
             models[r["trial"]] = model_from_checkpoint(ckpt).eval()
     with torch.no_grad():
         for i, m in models.items():
@@ -114,7 +117,10 @@ def compare(path: Path, minutes: float, work: Path) -> None:
     full = [r for r in rows if r["trial"] in models and not r["stopped"]]
     rho = spearman([r["best_valid_nrmse"] for r in full], [outer_of[r["trial"]] for r in full])
     ranked = sorted((r for r in rows if r["trial"] in models), key=lambda r: r["best_valid_nrmse"])
-    picks = {"best": [ranked[0]["trial"]], "greedy": list(result.members)}
+    # the search's rule before: from the best trial, the 6 best that improved on their start, joined greedily
+    top = [ranked[0]["trial"]] + [r["trial"] for r in ranked[1:] if r["trial"] in improved][:5]
+    chosen = select_ensemble([models[i] for i in top], inner_valid, context=context).chosen
+    picks = {"best": [ranked[0]["trial"]], "greedy": [top[j] for j in chosen]}
     seeds = defaultdict(list)
     for r in full:
         seeds[point_key(r)].append(r)
@@ -135,6 +141,7 @@ def compare(path: Path, minutes: float, work: Path) -> None:
             print(f"point {k}: {n} seeds, inner mean {mean:.4f}, outer mean {np.mean(outs):.4f} "
                   f"(min {min(outs):.4f}, max {max(outs):.4f})")
     print(f"Spearman (inner validation, outer validation) over {len(full)} trials: {rho:.3f}")
+    print(f"the search kept trials {', '.join(map(str, result.members))} ({result.selection})")
     print("| rule | trials | inner valid | outer valid (stands in for the test) |")
     print("|---|---|---:|---:|")
     with torch.no_grad():
