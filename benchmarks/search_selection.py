@@ -44,10 +44,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.stats import spearmanr
 
 from nnfmu.data import load_dataset, save_dataset
-from nnfmu.models import EnsembleStepModel, load_checkpoint, model_from_checkpoint
-from nnfmu.training.ensemble_select import select_ensemble
+from nnfmu.models import load_checkpoint, model_from_checkpoint
+from nnfmu.study.time_space import point_key
+from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import score
 from network_refit import outer_split  # benchmarks/network_refit.py
 
@@ -80,19 +82,6 @@ def run_search(inner_dir: Path, minutes: float, work: Path) -> tuple:
     return plan, result
 
 
-def point_key(row: dict) -> tuple:
-    return row["arch"], row["hidden"], row["lr"], row["feedback_noise"], row["truncate"]
-
-
-def ensemble(models: list):
-    return models[0] if len(models) == 1 else EnsembleStepModel.from_members(models).eval()
-
-
-def spearman(a, b) -> float:
-    ra, rb = (np.argsort(np.argsort(np.asarray(x))) for x in (a, b))
-    return float(np.corrcoef(ra, rb)[0, 1]) if len(ra) > 2 else math.nan
-
-
 def compare(path: Path, minutes: float, work: Path) -> None:
     ds = load_dataset(path)
     inner, outer = split(ds)
@@ -115,7 +104,8 @@ def compare(path: Path, minutes: float, work: Path) -> None:
         for i, m in models.items():
             outer_of[i] = score(m, outer, float64=True, context=context)
     full = [r for r in rows if r["trial"] in models and not r["stopped"]]
-    rho = spearman([r["best_valid_nrmse"] for r in full], [outer_of[r["trial"]] for r in full])
+    rho = (spearmanr([r["best_valid_nrmse"] for r in full], [outer_of[r["trial"]] for r in full]).statistic
+           if len(full) > 2 else math.nan)
     ranked = sorted((r for r in rows if r["trial"] in models), key=lambda r: r["best_valid_nrmse"])
     # the search's rule before: from the best trial, the 6 best that improved on their start, joined greedily
     top = [ranked[0]["trial"]] + [r["trial"] for r in ranked[1:] if r["trial"] in improved][:5]
@@ -146,8 +136,8 @@ def compare(path: Path, minutes: float, work: Path) -> None:
     print("|---|---|---:|---:|")
     with torch.no_grad():
         for name, members in picks.items():
-            model = ensemble([models[i] for i in members])
-            print(f"| {name} | {', '.join(map(str, members))} | {score(model, inner_valid, context=context):.4f} | "
+            model, inner_score = ensemble_score([models[i] for i in members], inner_valid, context)
+            print(f"| {name} | {', '.join(map(str, members))} | {inner_score:.4f} | "
                   f"{score(model, outer, float64=True, context=context):.4f} |", flush=True)
     oracle = min(outer_of, key=outer_of.get)
     print(f"| (trial 0, the defaults) | 0 | {rows[0]['best_valid_nrmse']:.4f} | {outer_of.get(0, math.nan):.4f} |")

@@ -46,7 +46,7 @@ from pathlib import Path
 from nnfmu.data import Dataset, save_dataset
 from nnfmu.errors import ConfigError
 from nnfmu.limits import UNBOUNDED_EPOCHS
-from nnfmu.study.time_space import KNOBS, again, label, trial_configs, trial_points
+from nnfmu.study.time_space import KNOBS, again, label, point_key, trial_configs, trial_points
 from nnfmu.study.trial_pool import Halving, Trials, run_trials
 from nnfmu.training import TrainConfig
 from nnfmu.training.ensemble_select import MAX_MEMBERS
@@ -414,7 +414,7 @@ def _best_point(scored: list) -> tuple | None:
     seeds: dict = {}
     for r in scored:
         if not r["stopped"]:
-            seeds.setdefault(tuple(r[k] for k in KNOBS), []).append(r)
+            seeds.setdefault(point_key(r), []).append(r)
     means = [(sum(r["best_valid_nrmse"] for r in rows) / len(rows), rows) for rows in seeds.values()
              if len(rows) >= MIN_SEEDS]
     if not means:

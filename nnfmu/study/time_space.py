@@ -64,7 +64,7 @@ def trial_points(model_config: ModelConfig, train_config: TrainConfig, given, n:
                "lr": train_config.lr if "lr" in given else TrainConfig.lr,
                "feedback_noise": train_config.feedback_noise if "feedback_noise" in given else 0.0,
                "truncate": train_config.truncate}
-    points, seen = [default], {_key(default)}
+    points, seen = [default], {point_key(default)}
     size = math.prod(len(v) for v in space.values())
     rng = np.random.default_rng(seed)
     k = 1
@@ -74,9 +74,9 @@ def trial_points(model_config: ModelConfig, train_config: TrainConfig, given, n:
             point = {"arch": arch, **{name: space[name][rng.integers(len(space[name]))] for name in KNOBS[1:]}}
             if "feedback_noise" not in given and not architectures.model_class(arch).takes_feedback_noise:
                 point["feedback_noise"] = 0.0  # searched for the base architecture; this one refuses any
-            if _key(point) not in seen:
+            if point_key(point) not in seen:
                 points.append(point)
-                seen.add(_key(point))
+                seen.add(point_key(point))
                 break
         k += 1
         if k > 50 * n:
@@ -110,7 +110,8 @@ def _builds(model_config: ModelConfig, arch: str, given) -> bool:
         return False
 
 
-def _key(point: dict) -> tuple:
+def point_key(point: dict) -> tuple:
+    """A point's knobs (:data:`KNOBS`) as a tuple: the same for every seed of the point (a trial's row or point)."""
     return tuple(point[k] for k in KNOBS)
 
 
@@ -129,14 +130,14 @@ def again(run: list, scores: dict, halved: set, keep: int) -> dict | None:
     """
     best, seeds = {}, {}
     for i, point in enumerate(run):
-        key = _key(point)
+        key = point_key(point)
         seeds[key] = max(seeds.get(key, point["seed"]), point["seed"])
         if i in scores and i not in halved:
             best[key] = min(best.get(key, math.inf), scores[i])
     top = sorted(best, key=best.get)[:keep]
     if not top:
         return None
-    counts = {key: sum(_key(p) == key for p in run) for key in top}
+    counts = {key: sum(point_key(p) == key for p in run) for key in top}
     key = min(top, key=lambda k: (counts[k], best[k]))
     return {**dict(zip(KNOBS, key)), "seed": seeds[key] + 1}
 
