@@ -81,6 +81,64 @@ def test_cosine_schedule_ends_at_lr_final(valve_tiny, tmp_path):
     assert cfg.lr * 0.1 < last < cfg.lr * 0.11  # the last batch of the last epoch
 
 
+def test_plateau_lowers_the_rate_after_a_quarter_of_the_patience_and_goes_on_from_the_best_weights():
+    from tests.test_models import make_model
+
+    from nnfmu.training.session import Session
+
+    model = make_model("gru")
+    session = Session(model, TrainConfig(lr_schedule="plateau", patience=8, lr_final=0.05), [], None, None)
+    session.record(None, 1.0, 0.0, False)  # epoch 0: the best so far
+    best = {k: v.clone() for k, v in model.state_dict().items()}
+    factors = []
+    for epoch, score_ in enumerate((2.0, 3.0, 0.9, 1.5, 1.5, 1.5, 1.5, 1.5, 1.5, 1.5, 1.5), start=1):
+        with torch.no_grad():  # the epoch's training moved the weights
+            for p in model.parameters():
+                p.add_(0.1)
+        if score_ < 1.0:
+            best = {k: v.clone() for k, v in model.state_dict().items()}
+        session.epoch = epoch
+        entry = session.record(0.0, score_, 0.0, False)
+        factors.append(entry["lr_factor"])
+        if entry["lr_decayed"]:  # back at the best weights, from which the smaller rate goes on
+            assert all(torch.equal(model.state_dict()[k], v) for k, v in best.items())
+    # 8 // 4 = 2 epochs without a better score, then x0.3; floored at lr_final; none after the patience is out
+    assert factors == pytest.approx([1, 0.3, 0.3, 0.3, 0.09, 0.09, 0.05, 0.05, 0.05, 0.05, 0.05])
+    assert session.patience_exhausted() and session.resume_state()["lr_level"] == pytest.approx(0.05)
+
+
+def test_plateau_rate_is_the_optimisers_and_survives_a_resume(valve_tiny, tmp_path):
+    cfg = TrainConfig(**{**FAST, "epochs": 12, "patience": 4, "lr_schedule": "plateau"})
+    out = tmp_path / "m.pt"
+    train(valve_tiny, gru(), cfg, out=out)
+    ckpt = load_checkpoint(out)
+    levels = [e["lr_factor"] for e in ckpt["history"][1:]]
+    assert ckpt["resume"]["optimizer"]["param_groups"][0]["lr"] == pytest.approx(cfg.lr * levels[-2])
+    assert ckpt["resume"]["lr_level"] == levels[-1]
+    resumed = train(valve_tiny, gru(), cfg.replace(epochs=14), out=out, resume=True)
+    assert [e["lr_factor"] for e in resumed.history[1:13]] == levels
+
+
+def test_anneal_goes_on_from_the_best_weights_at_a_tenth_of_the_rate_when_the_patience_runs_out(valve_tiny, tmp_path):
+    base = TrainConfig(**{**FAST, "epochs": 200, "patience": 4})
+    constant = train(valve_tiny, gru(), base)
+    annealed = train(valve_tiny, gru(), base.replace(lr_schedule="anneal"), out=tmp_path / "m.pt")
+    stop = len(constant.history)  # the constant stage is the constant schedule's run, epoch for epoch
+    assert [e["valid_nrmse"] for e in annealed.history[:stop]] == [e["valid_nrmse"] for e in constant.history]
+    assert annealed.best_valid_nrmse <= constant.best_valid_nrmse  # never worse on validation
+    factors = [e["lr_factor"] for e in annealed.history]
+    stages = [f for before, f in zip([None] + factors, factors) if f != before]
+    assert stages == pytest.approx([1.0, 0.1, 0.01])  # then lr_final ends it
+    assert factors.index(stages[1]) == stop
+    assert annealed.stop_reason == "early-stopping"
+
+
+@pytest.mark.parametrize("schedule", ["plateau", "anneal"])
+def test_schedules_that_follow_validation_need_a_patience(schedule):
+    with pytest.raises(ConfigError, match="patience > 0"):
+        TrainConfig(lr_schedule=schedule, patience=0)
+
+
 def test_joined_records_and_validation_horizon(valve_tiny):
     seqs = [(torch.ones(3, 2) * i, torch.ones(3, 1) * i) for i in range(3)]
     (u, y), = join_sequences(seqs)

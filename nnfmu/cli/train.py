@@ -31,6 +31,7 @@ from nnfmu.cli._resources import add_resource_options
 from nnfmu.cli._train_plan import TrainPlan, TrainRequest, make_plan
 from nnfmu.cli._train_search import run_search
 from nnfmu.cli._train_variants import print_test, report_end, run_both_modes, run_seeds
+from nnfmu.training.config import LR_SCHEDULES
 
 _DESCRIPTION = (
     "Train a network on a dataset folder, parallel (free-run loss) or series-parallel (one-step-ahead "
@@ -71,7 +72,10 @@ _TRAIN_OPTIONS = (
     ("--feedback-noise", "feedback_noise", float,
      "std of noise added to the fed-back output in training, in output standard deviations (default 0)"),
     ("--average", "average", str, "weight averaging: none, ema or swa (default: none)"),
-    ("--lr-schedule", "lr_schedule", str, "learning-rate schedule: constant or cosine over --epochs (default: constant)"),
+    ("--lr-schedule", "lr_schedule", str, "learning-rate schedule: constant; cosine over --epochs; plateau (x0.3 "
+     "after a quarter of the patience without a better validation score, from the best weights); anneal (constant "
+     "until the patience runs out, then x0.1 from the best weights with a quarter of the patience, twice) "
+     "(default: constant)"),
     ("--valid-fraction", "valid_fraction", float, "one training record without a valid split: the share held out "
      "for validation (default: min(test length, 25 %%) of the record, at least 10 %%, chosen from the data; 0.1 for "
      "several trajectories: that share of them, at random)"),
@@ -90,7 +94,7 @@ _FLAG_OPTIONS = (
                        "from one continuous recording; default: joined when the dataset says its records are "
                        "consecutive pieces, as the robot benchmark's)"),
 )
-_CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": ("constant", "cosine"),
+_CHOICES = {"average": ("none", "ema", "swa"), "lr_schedule": LR_SCHEDULES,
             "valid_horizon": ("auto", "split", "joined"), "physics_schedule": ("joint", "staged")}
 
 

@@ -16,7 +16,7 @@ from nnfmu.errors import ConfigError, check_options
 STRATEGIES = ("parallel", "series-parallel")
 DTYPES = ("float32", "float64")
 AVERAGES = ("none", "ema", "swa")
-LR_SCHEDULES = ("constant", "cosine")
+LR_SCHEDULES = ("constant", "cosine", "plateau", "anneal")
 VALID_HORIZONS = ("auto", "split", "joined")
 PHYSICS_SCHEDULES = ("joint", "staged")  # nnfmu.training.physics_schedule
 
@@ -70,11 +70,15 @@ class TrainConfig:
         EMA decay per optimiser step, in (0, 1).
     average_start : float
         SWA: the fraction of ``epochs`` after which the epoch-end weights are averaged.
-    lr_schedule : {'constant', 'cosine'}
+    lr_schedule : {'constant', 'cosine', 'plateau', 'anneal'}
         'cosine': the learning rate falls from ``lr`` to ``lr * lr_final`` over ``epochs``
         (per optimiser step, half a cosine period), so the preset's epochs fix the whole run.
+        'plateau': it falls by a factor of 0.3, down to ``lr * lr_final``, after a quarter of ``patience``
+        epochs without a better validation free run, and training goes on from the best weights. 'anneal': constant
+        until the patience runs out, then from the best weights at 0.1 times the rate with a quarter of the patience,
+        again, down to ``lr * lr_final`` (:mod:`nnfmu.training.lr_plateau`). Both need ``patience`` > 0.
     lr_final : float
-        Final learning rate of the cosine schedule, as a fraction of ``lr``.
+        Final learning rate of the cosine schedule, and the lowest of 'plateau' and 'anneal', as a fraction of ``lr``.
     join : bool
         Join the training trajectories end to end, in order, into one record before cutting
         ``truncate``-sample windows: for data cut from one continuous recording (the robot
@@ -141,6 +145,9 @@ class TrainConfig:
             raise ConfigError(f"lr must be > 0, got {self.lr!r}")
         if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float)) and self.max_minutes > 0):
             raise ConfigError(f"max_minutes must be None or > 0, got {self.max_minutes!r}")
+        if self.lr_schedule in ("plateau", "anneal") and self.patience == 0:
+            raise ConfigError(f"lr_schedule {self.lr_schedule!r} lowers the rate when validation stops improving for "
+                              "the patience or a share of it; give patience > 0 (--patience N) or another schedule")
         if not 0.0 < self.valid_fraction < 1.0:
             raise ConfigError(f"valid_fraction must be in (0, 1), got {self.valid_fraction!r}")
 

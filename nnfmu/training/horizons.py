@@ -60,7 +60,7 @@ def with_context(batch: Batch, context: int) -> tuple[torch.Tensor, torch.Tensor
 
 def lr_factor(cfg: TrainConfig, progress: float) -> float:
     """The learning rate as a fraction of ``cfg.lr`` at ``progress`` = epochs done / ``cfg.epochs`` (0 .. 1)."""
-    if cfg.lr_schedule == "constant":
+    if cfg.lr_schedule != "cosine":  # plateau and anneal lower it by steps: nnfmu.training.lr_plateau
         return 1.0
     t = min(max(progress, 0.0), 1.0)
     return cfg.lr_final + (1.0 - cfg.lr_final) * 0.5 * (1.0 + math.cos(math.pi * t))

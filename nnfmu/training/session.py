@@ -29,6 +29,7 @@ from nnfmu.training.compiled_rollout import training_rollout
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.evaluate import score
 from nnfmu.training.horizons import lr_factor, with_context
+from nnfmu.training.lr_plateau import RateSchedule
 from nnfmu.training.physics_schedule import PhysicsSchedule
 from nnfmu.training.resources import adamw, cpu_state
 
@@ -97,6 +98,7 @@ class Session:
             raise ConfigError(f"a {type(model).__name__} feeds back no output that feedback_noise could disturb; "
                               "train it with feedback_noise=0")
         self.average = WeightAverage(model, cfg)
+        self.rate = RateSchedule(cfg)
         self.context = model.config.init_window - 1  # samples before each training free run, for the init window
         self.epoch = 0
         self.history: list[dict] = []
@@ -136,7 +138,7 @@ class Session:
                 norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip if cfg.clip > 0 else math.inf)
                 if not (torch.isfinite(loss) and torch.isfinite(norm)):
                     self._diverged(float(loss.detach()), b)
-                factor = lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs)
+                factor = lr_factor(cfg, (self.epoch + b / len(batches)) / cfg.epochs) * self.rate.level
                 for group in self.optimizer.param_groups:  # lr_scale: nnfmu.training.physics_schedule
                     group["lr"] = cfg.lr * group.get("lr_scale", 1.0) * factor
                 self.optimizer.step()
@@ -177,9 +179,14 @@ class Session:
             self.bad_epochs = 0
         elif self.epoch > 0:
             self.bad_epochs += 1
+        decayed = self.epoch > 0 and not self.patience_exhausted() and self.rate.after_epoch(improved)
+        if decayed:
+            self.model.load_state_dict(self.best_state)  # the smaller rate goes on from the best weights
         entry = {"epoch": self.epoch, "train_loss": train_loss, "valid_nrmse": valid_nrmse,
                  "best_valid_nrmse": self.best_score, "best_epoch": self.best_epoch, "improved": improved,
                  "seconds": seconds, "partial": partial}
+        if self.rate.mode:
+            entry.update(lr_factor=self.rate.level, lr_decayed=decayed)  # the factor for the next epoch
         self.history.append(entry)
         self.snapshot = self.resume_state()  # what a write after a signal or an error holds
         for part in ("optimizer", "average"):  # the weights are copies already; these still reference live tensors
@@ -194,7 +201,15 @@ class Session:
         return time.monotonic() - self.last_write >= wait
 
     def patience_exhausted(self) -> bool:
-        return self.cfg.patience > 0 and self.bad_epochs >= self.cfg.patience
+        return self.cfg.patience > 0 and self.bad_epochs >= self.rate.patience_now()
+
+    def next_stage(self) -> bool:
+        """The patience out: True where ``lr_schedule='anneal'`` goes on at a lower rate from the best weights."""
+        if not self.rate.next_stage():
+            return False
+        self.model.load_state_dict(self.best_state)
+        self.bad_epochs = 0
+        return True
 
     @property
     def elapsed(self) -> float:
@@ -204,7 +219,7 @@ class Session:
         return {"epoch": self.epoch, "state_dict": state_snapshot(self.model),
                 "optimizer": cpu_state(self.optimizer.state_dict()), "torch_rng": torch.get_rng_state(),
                 "bad_epochs": self.bad_epochs, "best_valid_nrmse": self.best_score, "elapsed_s": self.elapsed,
-                "average": cpu_state(self.average.state_dict()), **self.schedule.state()}
+                "average": cpu_state(self.average.state_dict()), **self.schedule.state(), **self.rate.state()}
 
     def restore(self, ckpt: dict) -> None:
         """Continue from a checkpoint written by :meth:`save` (its ``resume`` section)."""
@@ -221,6 +236,7 @@ class Session:
         if "average" in r:
             self.average.load_state_dict(r["average"])
         self.schedule.restore(r)
+        self.rate.restore(r)
 
     def save(self, summary: dict | None = None) -> None:
         """Write the checkpoint: the best weights, the history and the last finished epoch's resume state."""

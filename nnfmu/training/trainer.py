@@ -319,7 +319,13 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
                        desc=f"{session.model.config.arch} {cfg.strategy}")
     with StopRequests() as stop, bar:
         _show(bar, session.history[-1])
-        while session.epoch < cfg.epochs and not session.patience_exhausted():
+        while session.epoch < cfg.epochs:
+            if session.patience_exhausted():
+                if not session.next_stage():
+                    break
+                bar.write(f"epoch {session.epoch}: learning rate {cfg.lr * session.rate.level:.3g} from here on, from "
+                          f"the best weights (epoch {session.best_epoch}), for up to {session.rate.patience_now()} "
+                          "epochs without a better validation score (anneal schedule)")
             t0 = time.monotonic()  # an epoch always starts: at least one batch per call, even over budget
             loss, early = session.train_epoch(stop, deadline)
             if stop.reason:
@@ -332,6 +338,10 @@ def _run(session: Session, progress: bool, callback: Callback | None) -> str:
             _show(bar, entry)
             advance(bar, session.epoch)
             _next_stage(session, bar, deadline)
+            if entry.get("lr_decayed"):
+                bar.write(f"epoch {session.epoch}: learning rate {cfg.lr * session.rate.level:.3g} from here on, "
+                          f"from the best weights (epoch {session.best_epoch}): no better validation score for "
+                          f"{session.rate.wait} epochs (plateau schedule)")
             if callback is not None:
                 try:
                     callback(session.epoch, dict(entry))
