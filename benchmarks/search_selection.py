@@ -48,6 +48,7 @@ from scipy.stats import spearmanr
 
 from nnfmu.data import load_dataset, save_dataset
 from nnfmu.models import load_checkpoint, model_from_checkpoint
+from nnfmu.study import time_search
 from nnfmu.study.time_space import point_key
 from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import score
@@ -122,7 +123,8 @@ def compare(path: Path, minutes: float, work: Path) -> None:
         chosen = select_ensemble([models[i] for i in members], inner_valid, context=context)
         picks["point greedy"] = [members[j] for j in chosen.chosen]
     print(f"\n## {path.name}: search of {minutes:g} min on the inner split, {len(result.rows)} trials "
-          f"({len(full)} trained to their own stop), {time.monotonic() - t0:.0f} s; CPU share "
+          f"({len(full)} trained to their own stop; further seeds from {time_search.RESEED_AFTER:.2f} of the "
+          f"budget), {time.monotonic() - t0:.0f} s; CPU share "
           f"{100 * result.usage['cpu_share']:.0f} %")
     if multi:
         means = sorted((np.mean([r['best_valid_nrmse'] for r in v]), k, len(v)) for k, v in multi.items())
@@ -139,6 +141,11 @@ def compare(path: Path, minutes: float, work: Path) -> None:
             model, inner_score = ensemble_score([models[i] for i in members], inner_valid, context)
             print(f"| {name} | {', '.join(map(str, members))} | {inner_score:.4f} | "
                   f"{score(model, outer, float64=True, context=context):.4f} |", flush=True)
+        kept = [i for i in result.members if i in models]
+        if kept == list(result.members):
+            model, inner_score = ensemble_score([models[i] for i in kept], inner_valid, context)
+            print(f"| (what the search kept) | {', '.join(map(str, kept))} | {inner_score:.4f} | "
+                  f"{score(model, outer, float64=True, context=context):.4f} |")
     oracle = min(outer_of, key=outer_of.get)
     print(f"| (trial 0, the defaults) | 0 | {rows[0]['best_valid_nrmse']:.4f} | {outer_of.get(0, math.nan):.4f} |")
     print(f"| (best trial on the outer validation) | {oracle} | "
@@ -158,7 +165,13 @@ def main() -> None:
     p.add_argument("datasets", nargs="+", type=Path)
     p.add_argument("--minutes", type=float, default=20.0, help="each search's budget (default 20)")
     p.add_argument("--work", type=Path, required=True, help="a folder for the searches' trials")
+    p.add_argument("--reseed-after", type=float, default=None, metavar="F",
+                   help="the share of the budget after which the search trains further seeds of its best points "
+                        "(nnfmu.study.time_search.RESEED_AFTER; default: the search's own; 1: only once every point "
+                        "has started, as before)")
     args = p.parse_args()
+    if args.reseed_after is not None:
+        time_search.RESEED_AFTER = args.reseed_after
     for path in args.datasets:
         compare(path, args.minutes, args.work / path.name)
 

@@ -161,6 +161,28 @@ def test_a_further_seed_of_a_point_trains_to_its_own_stop_as_trial_zero_does():
     assert 3 not in jobs.halving.stopped
 
 
+def test_late_in_the_budget_a_free_core_trains_a_further_seed_of_a_best_point_before_the_next_new_point(
+        monkeypatch):
+    from nnfmu.study import time_search
+    from nnfmu.study.time_search import _Jobs
+
+    ds = dataset(true_system())
+    model, train = ModelConfig(arch="gru", n_u=ds.n_u, n_y=ds.n_y), TrainConfig(epochs=50, patience=10)
+    points = trial_points(model, train, {"arch", "lr", "feedback_noise", "truncate"}, 10, seed=0, longest=500)
+    clock = [0.0]
+    monkeypatch.setattr(time_search.time, "monotonic", lambda: clock[0])
+    jobs = _Jobs(points, model, train, set(), ds, grace=3, reseed_at=100.0)
+    assert jobs.job(0)["model_config"]["hidden"] == points[0]["hidden"]  # trial 0: the defaults
+    assert jobs.job(1)["model_config"]["hidden"] == points[1]["hidden"]
+    jobs.trials.scores.update({0: 0.4, 1: 0.3})  # both trained to their own stop
+    clock[0] = 99.0  # before reseed_at: the space's next point
+    assert jobs.job(2)["model_config"]["hidden"] == points[2]["hidden"] and not jobs.reseeds
+    clock[0] = 100.0  # from reseed_at on: the best point that ended, with the next seed, trained to its own stop
+    seed = jobs.job(3)
+    assert (seed["model_config"]["hidden"], seed["train_config"]["seed"]) == (points[1]["hidden"], 1)
+    assert jobs.reseeds == {3} and 3 in jobs.halving.exempt and jobs.started_points == 3
+
+
 def test_a_trial_whose_worker_dies_is_a_failed_row_and_a_fresh_worker_takes_the_next(tmp_path):
     """A worker that ends in the middle of a trial (here: a job it cannot read) costs that trial only."""
     from nnfmu.data import save_dataset

@@ -16,9 +16,9 @@ the defaults it starts from. The whole search ends within the budget:
   of the kept model; before it, the time the ensemble selection and the test scores need (measured: the trials'
   validation free runs times the runs the selection makes, at most :data:`SELECT_SHARE` of the budget);
 - a core whose trial ended takes the next point while at least :data:`MIN_TRIAL_S` is left; once every point has
-  started, one of the best points that trained to their own stop again, with the next seed
-  (:func:`~nnfmu.study.time_space.again`), trained to its own stop too; a trial stops after an epoch when the next
-  would end past the trials' end.
+  started (or from :data:`RESEED_AFTER` of the budget on, which is off: 1), one of the best points that trained to
+  their own stop again, with the next seed (:func:`~nnfmu.study.time_space.again`), trained to its own stop too; a
+  trial stops after an epoch when the next would end past the trials' end.
 
 The trials validate on the validation split only (the test split stays in the driver). At the end a greedy
 ensemble selection on validation (:func:`nnfmu.training.ensemble_select.select_ensemble`) keeps one model: another
@@ -63,6 +63,11 @@ MIN_SELECT_S = 2.0
 SELECT_SAFETY = 3.0  # an ensemble's free run is in torch, a trial's validation often compiled
 MAX_CANDIDATES = 6  # the best trials on validation that the selection tries
 MIN_SEEDS = 2  # seeds of one point before the mean of their validation scores ranks it
+#: the share of the budget after which a core whose trial ended trains a further seed of one of the best points
+#: (:func:`~nnfmu.study.time_space.again`) rather than a new point, where one qualifies; 1: only once every point has
+#: started. Measured one level down (``benchmarks/search_selection.py --reseed-after``, docs/accuracy.md): 2/3 kept a
+#: worse model on the robot's 10 minutes (outer validation 0.7027 against 0.6844) and the same on the slider's.
+RESEED_AFTER = 1.0
 #: validation free runs of one member the selection makes at most: the best alone, then each round tries every
 #: candidate left as one more member of the ensemble so far
 SELECT_RUNS = 1 + sum((MAX_CANDIDATES - r) * (r + 1) for r in range(1, MAX_MEMBERS))
@@ -141,7 +146,7 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     grace = max(3, math.ceil(GRACE_STEPS / _steps_per_epoch(trials_ds, train_config)))
     points = trial_points(model_config, train_config, given, MAX_POINTS, seed, int(trials_ds.train.lengths.max()))
     test_runs = _test_runs(dataset, train_config, model_config.init_window)
-    jobs = _Jobs(points, model_config, train_config, given, trials_ds, grace)
+    jobs = _Jobs(points, model_config, train_config, given, trials_ds, grace, reseed_at=started + RESEED_AFTER * budget)
     trials, halving, run = jobs.trials, jobs.halving, jobs.run
 
     def end() -> float:  # the trials' end: the selection's time measured on the trials' validation runs
@@ -171,32 +176,40 @@ def search_for(dataset: Dataset, minutes: float, *, model_config, train_config: 
     usage = _usage(rows, cpus, time.monotonic() - called, trials)
     found = tuple((t / 60.0, i, v) for t, i, v in trials.best)
     extra = dict(rows=rows, seconds=seconds, usage=usage, progress=found,
-                 stalled=_stalled(found, rows, len(points), (end() - called) / 60.0))
+                 stalled=_stalled(found, rows, (jobs.started_points, len(points)), len(jobs.reseeds),
+                                  (end() - called) / 60.0))
     if kept is None:
         return TimeSearchResult(**extra)
     return dataclasses.replace(kept, **extra)
 
 
 class _Jobs:
-    """The trials' jobs: the space's points in order (the training's seed), then :func:`again`'s further seeds.
+    """The trials' jobs: the space's points in order (the training's seed), and :func:`again`'s further seeds once
+    every point has started or from ``reseed_at`` (a :func:`time.monotonic` time) on, whichever comes first.
 
     ``run``: the point of every trial handed out so far, with its ``seed``; ``trials`` and ``halving``: what the
-    workers reported and what successive halving stopped."""
+    workers reported and what successive halving stopped; ``reseeds``: the trials that are further seeds."""
 
     def __init__(self, points: list, model_config, train_config: TrainConfig, given: set, dataset: Dataset,
-                 grace: int):
+                 grace: int, reseed_at: float = math.inf):
         self.points, self.model_config, self.train_config, self.given = points, model_config, train_config, given
-        self.dataset, self.grace = dataset, grace
+        self.dataset, self.grace, self.reseed_at = dataset, grace, reseed_at
         self.run, self.trials, self.halving = [], Trials(), Halving(grace)
+        self.started_points, self.reseeds = 0, set()
 
     def job(self, i: int) -> dict | None:
         """Trial ``i``'s job for a worker; None while every point has started and none trained to its own stop."""
-        point = ({**self.points[i], "seed": self.train_config.seed} if i < len(self.points) else
-                 again(self.run, self.trials.scores, self.halving.stopped, MAX_CANDIDATES))
-        if point is None:
-            return None
-        if i >= len(self.points):  # a point that trained to its own stop, with another seed: it does so too
+        point = None
+        if self.started_points == len(self.points) or time.monotonic() >= self.reseed_at:
+            point = again(self.run, self.trials.scores, self.halving.stopped, MAX_CANDIDATES)
+        if point is not None:  # a point that trained to its own stop, with another seed: it does so too
             self.halving.exempt.add(i)
+            self.reseeds.add(i)
+        elif self.started_points < len(self.points):
+            point = {**self.points[self.started_points], "seed": self.train_config.seed}
+            self.started_points += 1
+        else:
+            return None
         self.run.append(point)
         mc, tc = trial_configs(point, self.model_config, self.train_config, self.given)
         tc = _budgeted(tc.replace(seed=point["seed"]), _steps_per_epoch(self.dataset, tc), self.grace)
@@ -268,8 +281,10 @@ def _usage(rows: list, cores: int, wall_s: float, trials: Trials) -> dict:
             "waited_s": sum(w for _, w in workers) if workers else None, "load": load}
 
 
-def _stalled(found: tuple, rows: list, n_points: int, trial_minutes: float) -> str:
-    """Why the best validation score stopped falling in the first half of the trials' time, or "" if it did not."""
+def _stalled(found: tuple, rows: list, points: tuple, seeds: int, trial_minutes: float) -> str:
+    """Why the best validation score stopped falling in the first half of the trials' time, or "" if it did not.
+
+    ``points``: (the space's points started, all of them); ``seeds``: the trials that were further seeds."""
     if not found or found[-1][0] >= 0.5 * trial_minutes:
         return ""
     after = [r for r in rows if r["trial"] > found[-1][1]]
@@ -277,8 +292,9 @@ def _stalled(found: tuple, rows: list, n_points: int, trial_minutes: float) -> s
     if not after:
         return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: the trials "
                 "still training then did not improve on it, and no later trial started")
-    seeds = max(0, len(rows) - n_points)
-    tried = f"every one of the space's {n_points} points was tried and " if seeds else ""
+    started, n_points = points
+    tried = (f"every one of the space's {n_points} points was tried and " if started == n_points else
+             f"{started} of the space's {n_points} points were tried and ")
     more = f", {seeds} of them the best points again with further seeds" if seeds else ""
     return (f"the best validation NRMSE last fell at {found[-1][0]:.1f} of {trial_minutes:.1f} minutes: {tried}none "
             f"of the {len(after)} trials after trial {found[-1][1]} beat it on validation ({halved} stopped by "
