@@ -134,9 +134,11 @@ def test_anneal_goes_on_from_the_best_weights_at_a_tenth_of_the_rate_when_the_pa
 
 
 @pytest.mark.parametrize("schedule", ["plateau", "anneal"])
-def test_schedules_that_follow_validation_need_a_patience(schedule):
-    with pytest.raises(ConfigError, match="patience > 0"):
-        TrainConfig(lr_schedule=schedule, patience=0)
+def test_without_a_patience_the_schedules_that_follow_validation_keep_the_rate_and_say_so(valve_tiny, schedule):
+    result = train(valve_tiny, gru(), TrainConfig(**{**FAST, "lr_schedule": schedule, "patience": 0}))
+    constant = train(valve_tiny, gru(), TrainConfig(**{**FAST, "patience": 0}))
+    assert [e["valid_nrmse"] for e in result.history] == [e["valid_nrmse"] for e in constant.history]
+    assert any("stays constant" in note and "--patience" in note for note in result.notes)
 
 
 def test_joined_records_and_validation_horizon(valve_tiny):

@@ -76,7 +76,8 @@ class TrainConfig:
         'plateau': it falls by a factor of 0.3, down to ``lr * lr_final``, after a quarter of ``patience``
         epochs without a better validation free run, and training goes on from the best weights. 'anneal': constant
         until the patience runs out, then from the best weights at 0.1 times the rate with a quarter of the patience,
-        again, down to ``lr * lr_final`` (:mod:`nnfmu.training.lr_plateau`). Both need ``patience`` > 0.
+        again, down to ``lr * lr_final`` (:mod:`nnfmu.training.lr_plateau`). Both count against ``patience``: with 0
+        (no early stopping, as ``max_minutes`` alone sets it for a hybrid) the rate stays constant, and the run says so.
     lr_final : float
         Final learning rate of the cosine schedule, and the lowest of 'plateau' and 'anneal', as a fraction of ``lr``.
     join : bool
@@ -145,9 +146,6 @@ class TrainConfig:
             raise ConfigError(f"lr must be > 0, got {self.lr!r}")
         if self.max_minutes is not None and not (isinstance(self.max_minutes, (int, float)) and self.max_minutes > 0):
             raise ConfigError(f"max_minutes must be None or > 0, got {self.max_minutes!r}")
-        if self.lr_schedule in ("plateau", "anneal") and self.patience == 0:
-            raise ConfigError(f"lr_schedule {self.lr_schedule!r} lowers the rate when validation stops improving for "
-                              "the patience or a share of it; give patience > 0 (--patience N) or another schedule")
         if not 0.0 < self.valid_fraction < 1.0:
             raise ConfigError(f"valid_fraction must be in (0, 1), got {self.valid_fraction!r}")
 

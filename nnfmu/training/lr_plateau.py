@@ -10,6 +10,8 @@ the rate (the optimiser keeps its moment estimates), down to ``lr * lr_final``:
 - ``anneal``: the constant rate until the patience runs out, then the rate times :data:`ANNEAL_FACTOR` with a
   quarter of the patience, again until ``lr_final``. The constant stage is the constant schedule's run itself,
   so the kept weights are never worse on validation than the constant schedule's; it costs the later stages' epochs.
+
+Both count epochs against the early-stopping patience; with ``patience`` 0 the rate stays constant.
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ class RateSchedule:
     """One run's state: ``level`` (the factor on ``lr``), epochs since the last improvement or decay, decays."""
 
     def __init__(self, cfg: TrainConfig):
-        self.mode = cfg.lr_schedule if cfg.lr_schedule in ("plateau", "anneal") else None
+        # without a patience (0: no early stopping) there is nothing to count: the rate stays constant
+        self.mode = cfg.lr_schedule if cfg.lr_schedule in ("plateau", "anneal") and cfg.patience > 0 else None
         self.patience, self.floor, self.wait = cfg.patience, cfg.lr_final, plateau_wait(cfg)
         self.level, self.stalled, self.decays = 1.0, 0, 0
 

@@ -231,6 +231,9 @@ def train(
     dataset, notes = prepare_dataset(dataset, cfg)
     valid, valid_notes = validation_trajectories(dataset, cfg)
     notes += valid_notes
+    if cfg.lr_schedule in ("plateau", "anneal") and cfg.patience == 0:
+        notes.append(f"lr_schedule {cfg.lr_schedule!r} counts epochs against the patience, which is 0 (no early "
+                     "stopping): the learning rate stays constant; give a patience (--patience N) for it to fall")
     dtype, device = getattr(torch, cfg.dtype), resolve_device(device)
     with torch.random.fork_rng(devices=[]), flush_denormals(), torch_threads(check_threads(threads)):
         started = time.monotonic()
