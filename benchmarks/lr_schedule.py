@@ -11,8 +11,9 @@ once a dataset, then ``--linear-path`` for both, so that the start is equal and 
 and prints, per cell, every seed's validation free-run NRMSE (which decides) and the kept model's, the CPU
 seconds, and the test NRMSE that ``nnfmu train`` reports (float64 free run from y0; reported only, never used to
 choose). The last line counts the cells where the option is better on validation, and gives the geometric mean of
-the kept validation ratios. Each training's output is kept in ``W/D/A-default.log`` and ``W/D/A-SLUG.log`` (the option's words).
-A cell already measured is read back from its ``W/D/A-NAME.json``, not trained again. Not part of the tests.
+the kept validation ratios. Each training's output is kept in ``W/D/A-default.log`` and ``W/D/A-SLUG.log`` (SLUG:
+the option's words joined by dashes). A cell already measured is read back from its ``W/D/A-NAME.json``, not
+trained again. Not part of the tests.
 
     python benchmarks/lr_schedule.py /tmp/ds/valve /tmp/ds/slider --archs gru tcn --work /tmp/lrs
 """
