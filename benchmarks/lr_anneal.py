@@ -34,17 +34,20 @@ from nnfmu.training.trainer import _new_model
 def annealed(carved, model_config, cfg, linear):
     """One ``anneal`` training; (model at its best, the constant stage's best state, inner scores, epochs)."""
     model = _new_model(model_config, carved, cfg, linear)
-    seen = {"state": copy.deepcopy(model.state_dict()), "constant": None, "score": math.inf, "epochs": 0}
+    # the best state so far, and the best score as of the previous epoch (epoch 0's included, which no callback sees)
+    seen = {"state": copy.deepcopy(model.state_dict()), "constant": None, "best": math.inf, "epochs": 0}
 
     def at_epoch(epoch, entry):
         if seen["constant"] is None and entry["lr_factor"] < 1.0:  # the first epoch of the second stage
-            seen["constant"], seen["constant_score"], seen["epochs"] = seen["state"], seen["score"], epoch - 1
+            seen["constant"], seen["constant_score"], seen["epochs"] = seen["state"], seen["best"], epoch - 1
         if entry["improved"]:
-            seen["state"], seen["score"] = copy.deepcopy(model.state_dict()), entry["valid_nrmse"]
+            seen["state"] = copy.deepcopy(model.state_dict())
+        seen["best"] = entry["best_valid_nrmse"]
 
     result = train(carved, model, cfg.replace(lr_schedule="anneal"), callback=at_epoch, device="cpu")
     if seen["constant"] is None:  # the constant stage ended the run (its epochs or time): anneal changed nothing
-        seen["constant"], seen["constant_score"], seen["epochs"] = seen["state"], seen["score"], len(result.history) - 1
+        seen["constant"], seen["constant_score"] = seen["state"], result.best_valid_nrmse
+        seen["epochs"] = len(result.history) - 1
     return result, seen
 
 
