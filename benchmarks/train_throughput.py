@@ -22,8 +22,9 @@ Comparisons (``--compare``):
   so the two arms would be the same: the comparison sets the count itself;
 - ``strategies``: parallel against series-parallel, for each ``--archs``;
 - ``paths``: the parallel update in torch (the free run as torch operations, AdamW's
-  default implementation: nnfmu before the compiled paths) against nnfmu's training path
-  (the compiled free run, :mod:`nnfmu.training.compiled_rollout`, and fused AdamW).
+  default implementation: nnfmu before the compiled paths; ``NNFMU_COMPILED_ROLLOUT=0`` while it runs)
+  against nnfmu's training path (the compiled free run, :mod:`nnfmu.training.compiled_rollout`, or the ss
+  network's compiled state loop, :mod:`nnfmu.ss.compiled`, and fused AdamW).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ import torch
 
 from nnfmu.models import ModelConfig, build_model
 from nnfmu.training.batches import masked_mse
-from nnfmu.training.compiled_rollout import training_rollout
+from nnfmu.training.compiled_rollout import ENV_SWITCH, training_rollout
 from nnfmu.training.resources import adamw
 
 N_TRAJ, N_STEPS, N_U, N_Y = 900, 500, 2, 2
@@ -75,6 +76,21 @@ def check_cores(many: int, cores: set[int] | None = None) -> None:
                          f"pin to {many} cores, e.g. taskset -c 0-{many - 1}")
 
 
+def in_torch(rollout):
+    """``rollout`` with the compiled paths off while its forward runs (its backward is then torch's autograd)."""
+    def run(u, y):
+        before = os.environ.get(ENV_SWITCH)
+        os.environ[ENV_SWITCH] = "0"
+        try:
+            return rollout(u, y)
+        finally:
+            if before is None:
+                del os.environ[ENV_SWITCH]
+            else:
+                os.environ[ENV_SWITCH] = before
+    return run
+
+
 def variants(kind: str, model, threads: int | None, many: int = 2) -> dict:
     """name -> (rollout, threads, optimiser) of the comparison ``kind`` (``many``: the threads arm's count)."""
     parallel = lambda u, y: model.rollout_normalised(u, y[:, 0])  # noqa: E731
@@ -84,7 +100,7 @@ def variants(kind: str, model, threads: int | None, many: int = 2) -> dict:
                 "1 thread (nnfmu default)": (parallel, 1, plain_adamw)}
     if kind == "paths":
         model.train()
-        return {"torch free run, AdamW": (parallel, one, plain_adamw),
+        return {"torch free run, AdamW": (in_torch(parallel), one, plain_adamw),
                 "compiled free run, fused AdamW": (training_rollout(model), one, nnfmu_adamw)}
     return {"parallel": (parallel, one, plain_adamw),
             "series-parallel": (lambda u, y: model.rollout_normalised(u, y[:, 0], y), one, plain_adamw)}

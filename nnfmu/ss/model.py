@@ -160,11 +160,17 @@ class SSStepModel(StepModel):
         """``z_1 .. z_T`` (B, T, n_x) from ``z_0`` (B, n_x) and ``u_0 .. u_{T-1}`` (B, T, n_u).
 
         The same sums as :meth:`_state_next`, arranged for the loop: the input's share of ``A z + B u + b`` and
-        of ``f``'s first layer for all steps at once, and ``z``'s shares of both in one product per step.
+        of ``f``'s first layer for all steps at once, and ``z``'s shares of both in one product per step; the loop
+        itself is compiled C where it applies (:mod:`nnfmu.ss.compiled`).
         """
+        from nnfmu.ss.compiled import compiled_states
+
         first, s = self.f[0], self.config.n_states
         drive = un @ self.lin_B.T + self.lin_b  # (B, T, n_x)
         pre = un @ first.weight[:, s:].T + first.bias  # (B, T, hidden)
+        loop = compiled_states(self)
+        if loop is not None:  # the same loop in C (nnfmu/ss/state_loop.c)
+            return loop(z, drive, pre)
         joint = torch.cat([self.lin_A.T, first.weight[:, :s].T], dim=1)  # z -> [A z | W_z z]
         rest = self.f[1:]
         zs = []

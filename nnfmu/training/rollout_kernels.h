@@ -1,5 +1,6 @@
-/* What the compiled free runs share (rollout.c: the recurrent networks; window_rollout.c: the TCN): the real type,
- * vector exp/tanh, the matrix kernels, and the linear path's step forwards and backwards.
+/* What the compiled free runs share (rollout.c: the recurrent networks; window_rollout.c: the TCN and the MLP;
+ * nnfmu/ss/state_loop.c: the ss network's state): the real type, vector exp/tanh, the matrix kernels, the
+ * activations, and the linear path's step forwards and backwards.
  *
  * nnfmu/training/compiled_rollout.py pastes this file in place of its #include line before compiling, so that the
  * cached library is keyed by everything it was compiled from.
@@ -93,6 +94,36 @@ static inline void vecmat(int n, int m, const real *restrict x, const real *rest
 }
 
 static inline real sigmoid(real v) { return (real)1 / ((real)1 + EXP(-v)); }
+
+/* The hidden layers' nonlinearities (nnfmu/models/activation.py), by the codes of compiled_window.ACTIVATIONS. */
+enum { ACT_TANH = 0, ACT_RELU = 1, ACT_SIGMOID = 2, ACT_ELU = 3, ACT_SILU = 4 };
+
+/* o = act(a) on a row; keep receives what act_grad needs: o, or for silu a. */
+static inline void activate(int act, int n, const real *a, real *restrict o, real *restrict keep) {
+  switch (act) {
+    case ACT_TANH: for (int j = 0; j < n; ++j) o[j] = TANH(a[j]); break;
+    case ACT_RELU: for (int j = 0; j < n; ++j) o[j] = a[j] > 0 ? a[j] : 0; break;
+    case ACT_SIGMOID: for (int j = 0; j < n; ++j) o[j] = sigmoid(a[j]); break;
+    case ACT_ELU: for (int j = 0; j < n; ++j) o[j] = a[j] > 0 ? a[j] : EXP(a[j]) - 1; break;
+    default: for (int j = 0; j < n; ++j) o[j] = a[j] * sigmoid(a[j]); break;
+  }
+  if (keep) memcpy(keep, act == ACT_SILU ? a : o, sizeof(real) * n);
+}
+
+/* ga = g * act'(.) from what activate kept. */
+static inline void act_grad(int act, int n, const real *kept, const real *g, real *restrict ga) {
+  switch (act) {
+    case ACT_TANH: for (int j = 0; j < n; ++j) ga[j] = g[j] * ((real)1 - kept[j] * kept[j]); break;
+    case ACT_RELU: for (int j = 0; j < n; ++j) ga[j] = kept[j] > 0 ? g[j] : 0; break;
+    case ACT_SIGMOID: for (int j = 0; j < n; ++j) ga[j] = g[j] * kept[j] * ((real)1 - kept[j]); break;
+    case ACT_ELU: for (int j = 0; j < n; ++j) ga[j] = kept[j] > 0 ? g[j] : g[j] * (kept[j] + 1); break;
+    default:
+      for (int j = 0; j < n; ++j) {
+        const real sg = sigmoid(kept[j]);
+        ga[j] = g[j] * sg * ((real)1 + kept[j] * ((real)1 - sg));
+      }
+  }
+}
 
 /* The linear path's step: z_next = A z + B u + b + G n, y_next = C z_next + d + alpha * n. */
 static void path_forward(int n_z, int n_u, int n_y, const real **lin, const real *G, const real *alpha,

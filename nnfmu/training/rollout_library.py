@@ -88,24 +88,30 @@ def library_or_none(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL | 
         return None
 
 
-def source(stem: str) -> str:
-    """``<stem>.c`` with ``rollout_kernels.h`` pasted in place of its include line: what is compiled (and hashed)."""
+def source(c_file: Path) -> str:
+    """``c_file`` with ``rollout_kernels.h`` pasted in place of its include line: what is compiled (and hashed)."""
     kernels = (_HERE / "rollout_kernels.h").read_text()
-    return (_HERE / f"{stem}.c").read_text().replace('#include "rollout_kernels.h"', kernels)
+    return c_file.read_text().replace('#include "rollout_kernels.h"', kernels)
 
 
-def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
-    """Compile ``<stem>.c`` (``rollout``: the recurrent cells, ``window_rollout``: the TCN and the MLP) for
-    ``dtype`` once per machine (cached by source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``)
-    and load it."""
+def compiled(dtype: torch.dtype, c_file: Path) -> ctypes.CDLL:
+    """``c_file`` (a C file that includes ``rollout_kernels.h``) compiled for ``dtype`` once per machine (cached by
+    source, flags and CPU, like the compiled physics: ``$NNFMU_CACHE_DIR``) and loaded; its entries' argtypes are the
+    caller's to set. FmuBuildError or OSError when it cannot be compiled or loaded."""
     from nnfmu import cbuild
 
     flags = (*_FLAGS, f"-DNNFMU_REAL={REALS[dtype]}")
     # no libmvec (not glibc on x86-64): scalar exp and tanh, same values
-    target = cbuild.build_cached(f"{stem}_{REALS[dtype]}", source(stem), flags=flags,
+    target = cbuild.build_cached(f"{c_file.stem}_{REALS[dtype]}", source(c_file), flags=flags,
                                  link_choices=(("-lmvec", "-lm"), ("-lm",)),
-                                 what=f"compiling the free run (nnfmu/training/{stem}.c)")
-    lib = cbuild.load(target)
+                                 what=f"compiling the free run ({c_file.parent.name}/{c_file.name})")
+    return cbuild.load(target)
+
+
+def library(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL:
+    """``<stem>.c`` of this folder (``rollout``: the recurrent cells, ``window_rollout``: the TCN and the MLP),
+    :func:`compiled` for ``dtype``, with its entries' argtypes."""
+    lib = compiled(dtype, _HERE / f"{stem}.c")
     path = [ctypes.c_int] + [ctypes.c_void_p] * 3
     if stem == "window_rollout":
         header = [ctypes.c_int] * 10 + [ctypes.c_double]

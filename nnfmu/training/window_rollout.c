@@ -38,7 +38,6 @@
  */
 #include "rollout_kernels.h"
 
-enum { ACT_TANH = 0, ACT_RELU = 1, ACT_SIGMOID = 2, ACT_ELU = 3, ACT_SILU = 4 };
 enum { TCN = 0, MLP = 1 };
 
 typedef struct {
@@ -94,33 +93,6 @@ static layer_t *make_layers(const shape_t *s, const real **params, int with_grad
         }
   }
   return layers;
-}
-
-/* o = act(a) on a row; keep receives what act_grad needs: o, or for silu a. */
-static void activate(int act, int n, const real *a, real *restrict o, real *restrict keep) {
-  switch (act) {
-    case ACT_TANH: for (int j = 0; j < n; ++j) o[j] = TANH(a[j]); break;
-    case ACT_RELU: for (int j = 0; j < n; ++j) o[j] = a[j] > 0 ? a[j] : 0; break;
-    case ACT_SIGMOID: for (int j = 0; j < n; ++j) o[j] = sigmoid(a[j]); break;
-    case ACT_ELU: for (int j = 0; j < n; ++j) o[j] = a[j] > 0 ? a[j] : EXP(a[j]) - 1; break;
-    default: for (int j = 0; j < n; ++j) o[j] = a[j] * sigmoid(a[j]); break;
-  }
-  if (keep) memcpy(keep, act == ACT_SILU ? a : o, sizeof(real) * n);
-}
-
-/* ga = g * act'(.) from what activate kept. */
-static void act_grad(int act, int n, const real *kept, const real *g, real *restrict ga) {
-  switch (act) {
-    case ACT_TANH: for (int j = 0; j < n; ++j) ga[j] = g[j] * ((real)1 - kept[j] * kept[j]); break;
-    case ACT_RELU: for (int j = 0; j < n; ++j) ga[j] = kept[j] > 0 ? g[j] : 0; break;
-    case ACT_SIGMOID: for (int j = 0; j < n; ++j) ga[j] = g[j] * kept[j] * ((real)1 - kept[j]); break;
-    case ACT_ELU: for (int j = 0; j < n; ++j) ga[j] = kept[j] > 0 ? g[j] : g[j] * (kept[j] + 1); break;
-    default:
-      for (int j = 0; j < n; ++j) {
-        const real sg = sigmoid(kept[j]);
-        ga[j] = g[j] * sg * ((real)1 + kept[j] * ((real)1 - sg));
-      }
-  }
 }
 
 /* The step that tap j of a layer reads at step k: k - (K-1-j) d; before 0, the rest. */
