@@ -89,6 +89,7 @@ static void step(const shape_t *sh, const weights_t *w, const real *z, const rea
  * memory runs out. */
 int nnfmu_ss_forward(int B, int T, int s, int H, int L, int act, double scale, const real *A, const real **params,
                      const real *z0, const real *drive, const real *pre, real *zs, real *hs, real *as) {
+  if (B <= 0 || T <= 0) return 0; /* nothing to run */
   const shape_t sh = {B, T, s, H, L, act, (real)scale};
   weights_t w;
   const int made = make_weights(&sh, A, params, &w);
@@ -122,6 +123,10 @@ int nnfmu_ss_forward(int B, int T, int s, int H, int L, int act, double scale, c
 int nnfmu_ss_backward(int B, int T, int s, int H, int L, int act, double scale, const real *A, const real **params,
                       const real *z0, const real *zs, const real *hs, const real *as, const real *gzs, real **grads,
                       real *gz0, real *gdrive, real *gpre) {
+  if (B <= 0 || T <= 0) { /* nothing ran: dL/dz0 is dL/dzs's, which is empty */
+    if (B > 0) memset(gz0, 0, sizeof(real) * B * s);
+    return 0;
+  }
   const shape_t sh = {B, T, s, H, L, act, (real)scale};
   weights_t w;
   const int made = make_weights(&sh, A, params, &w);
