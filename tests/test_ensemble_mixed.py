@@ -81,7 +81,7 @@ def test_the_selection_keeps_members_whose_errors_cancel_and_leaves_out_one_that
         for model, shift in ((up, 0.3), (down, -0.3), (again, 0.3)):
             model.lin_d.add_(shift)
     selection = select_ensemble([up, again, down], data.valid)
-    assert selection.chosen == [0, 2] and selection.stopped.startswith("no member lowered")
+    assert selection.chosen == [0, 2] and selection.stopped.startswith("no further member lowered")
     assert selection.scores[1] < 0.5 * selection.scores[0]
     # the third member was tried and left out: its ensemble's score is reported, above the kept one's
     from nnfmu.training.ensemble_select import ensemble_score

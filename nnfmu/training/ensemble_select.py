@@ -97,7 +97,9 @@ def select_ensemble(candidates: Sequence[StepModel], valid: Trajectories, *, con
             scores.append(tried[best])
             if not late:
                 continue
-        stopped = "the time was up" if late else f"no member lowered the validation NRMSE by {100 * min_gain:g} %"
+        further = "further " if len(chosen) > 1 else ""
+        gain = f"no {further}member lowered the validation NRMSE by {100 * min_gain:g} %"
+        stopped = "the time was up" if late else gain
         rejected = None if best is None or best in chosen else tried[best]
         break
     model = candidates[0] if len(chosen) == 1 else EnsembleStepModel.from_members([candidates[i] for i in chosen])
