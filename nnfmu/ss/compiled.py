@@ -11,7 +11,7 @@ model, the encoder's initial state, the output map ``h``), so its autograd reach
     zs = loop(z0, drive, pre)           # (B, n_x), (B, T, n_x), (B, T, hidden) -> (B, T, n_x): z_1 .. z_T
 
 It applies on the CPU in float32 or float64, to a model of exactly :class:`~nnfmu.ss.model.SSStepModel` (a subclass
-may compute another step) with at least one hidden layer. The library is compiled at first use and cached like the
+may compute another step; the model checks that) with at least one hidden layer. The library is compiled at first use and cached like the
 other compiled free runs (:mod:`nnfmu.training.rollout_library`); without a compiler it warns once and torch runs the
 loop (slower, same values). ``NNFMU_COMPILED_ROLLOUT=0`` turns it off. Values and gradients equal torch's to rounding
 (tested in float64).
@@ -51,11 +51,12 @@ def _library(dtype: torch.dtype) -> ctypes.CDLL | None:
 
 
 def compiled_states(model):
-    """``loop(z0, drive, pre) -> zs`` by the compiled state loop (module docstring), or None where it does not apply."""
-    from nnfmu.ss.model import SSStepModel
+    """``loop(z0, drive, pre) -> zs`` by the compiled state loop (module docstring), or None where it does not apply.
 
+    ``model``: an :class:`~nnfmu.ss.model.SSStepModel`, not a subclass (the model checks it: a subclass may compute
+    another step)."""
     c = model.config
-    if os.environ.get(ENV_SWITCH, "1") == "0" or type(model) is not SSStepModel or c.layers < 1:
+    if os.environ.get(ENV_SWITCH, "1") == "0" or c.layers < 1:
         return None
     tensors = [*model.f.parameters(), model.lin_A]
     dtype = tensors[0].dtype

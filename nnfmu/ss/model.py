@@ -38,6 +38,7 @@ from nnfmu.errors import ShapeError
 from nnfmu.models import StepModel
 from nnfmu.models.encoder import encoder_input, make_encoder
 from nnfmu.models.activation import activation_module
+from nnfmu.ss.compiled import compiled_states
 from nnfmu.ss.config import SSConfig
 
 
@@ -163,12 +164,10 @@ class SSStepModel(StepModel):
         of ``f``'s first layer for all steps at once, and ``z``'s shares of both in one product per step; the loop
         itself is compiled C where it applies (:mod:`nnfmu.ss.compiled`).
         """
-        from nnfmu.ss.compiled import compiled_states
-
         first, s = self.f[0], self.config.n_states
         drive = un @ self.lin_B.T + self.lin_b  # (B, T, n_x)
         pre = un @ first.weight[:, s:].T + first.bias  # (B, T, hidden)
-        loop = compiled_states(self)
+        loop = compiled_states(self) if type(self) is SSStepModel else None  # a subclass may step otherwise
         if loop is not None:  # the same loop in C (nnfmu/ss/state_loop.c)
             return loop(z, drive, pre)
         joint = torch.cat([self.lin_A.T, first.weight[:, :s].T], dim=1)  # z -> [A z | W_z z]
