@@ -11,10 +11,10 @@ model, the encoder's initial state, the output map ``h``), so its autograd reach
     zs = loop(z0, drive, pre)           # (B, n_x), (B, T, n_x), (B, T, hidden) -> (B, T, n_x): z_1 .. z_T
 
 It applies on the CPU in float32 or float64, to a model of exactly :class:`~nnfmu.ss.model.SSStepModel` (a subclass
-may compute another step; the model checks that) with at least one hidden layer. The library is compiled at first use and cached like the
-other compiled free runs (:mod:`nnfmu.training.rollout_library`); without a compiler it warns once and torch runs the
-loop (slower, same values). ``NNFMU_COMPILED_ROLLOUT=0`` turns it off. Values and gradients equal torch's to rounding
-(tested in float64).
+may compute another step; the model checks that) with at least one hidden layer. The library is compiled at first
+use and cached like the other compiled free runs (:mod:`nnfmu.training.rollout_library`); without a compiler it warns
+once and torch runs the loop (slower, same values). ``NNFMU_COMPILED_ROLLOUT=0`` turns it off. Values and gradients
+equal torch's to rounding (tested in float64).
 """
 
 from __future__ import annotations
