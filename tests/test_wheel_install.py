@@ -92,6 +92,8 @@ TINY_DEMO = textwrap.dedent("""
     print("nnfmu from", nnfmu.__file__)
     for stem in ("rollout", "window_rollout"):
         assert library_or_none(torch.float32, stem) is not None, stem + ".c did not compile"
+    from nnfmu.ss.compiled import _library
+    assert _library(torch.float32) is not None, "nnfmu/ss/state_loop.c did not compile"
     budget = get_budget("valve", "demo").replace(
         data_size="small", max_train=None, max_test=None, epochs=2, max_minutes=None,
         hyper={"gru": Hyper(hidden=8, batch_size=16)}, linear={"refine": False, "max_order": 4})
