@@ -24,13 +24,16 @@ The rules, each using the inner validation only:
   have the lowest mean inner NRMSE, among points with at least two such seeds, and the ensemble of its (up to 4)
   best seeds, every one of them, not chosen greedily;
 - ``point greedy`` (the search's rule now, where a point has two seeds; it also prints what the search kept):
-  the same point, its seeds joined greedily as ``greedy`` does.
+  the same point, its seeds joined greedily as ``greedy`` does;
+- ``point in order``: the same point, the ensemble of its first (up to 4) seeds in the order they were trained,
+  every one of them: no choice among the seeds at all.
 
 It prints each rule's inner and outer NRMSE, the best trial on the outer validation (which no rule can know), trial
 0 (the defaults), and the Spearman correlation of inner against outer over the trials that trained to their own stop.
 Not part of the tests.
 
     python benchmarks/search_selection.py data/valve data/robot --minutes 20 --work /tmp/sel
+    python benchmarks/search_selection.py data/valve --work /tmp/sel --rescore   # the rules again, on the kept trials
 """
 
 from __future__ import annotations
@@ -83,14 +86,30 @@ def run_search(inner_dir: Path, minutes: float, work: Path) -> tuple:
     return plan, result
 
 
-def compare(path: Path, minutes: float, work: Path) -> None:
+def rescored(work: Path) -> tuple:
+    """``(plan, result)`` of a search run before in ``work`` (its ``rows.json``, ``trials`` and ``inner``), without
+    training: ``result`` has the rows only (what the search kept and its CPU share are not known again)."""
+    from types import SimpleNamespace
+
+    from nnfmu.cli._train_plan import TrainRequest, make_plan
+
+    rows = json.loads((work / "rows.json").read_text())
+    plan = make_plan(TrainRequest(data=str(work / "inner"), out=work / "rescore.pt", quiet=True, force=True,
+                                  train_options={"max_minutes": 1}))
+    return plan, SimpleNamespace(rows=rows, members=None, selection=None, usage=None)
+
+
+def compare(path: Path, minutes: float, work: Path, rescore: bool = False) -> None:
     ds = load_dataset(path)
     inner, outer = split(ds)
     work.mkdir(parents=True, exist_ok=True)
-    inner_dir = save_dataset(inner, work / "inner")
     t0 = time.monotonic()
-    plan, result = run_search(inner_dir, minutes, work)
-    (work / "rows.json").write_text(json.dumps(result.rows, indent=1))  # with the trials: for later comparisons
+    if rescore:
+        plan, result = rescored(work)
+    else:
+        inner_dir = save_dataset(inner, work / "inner")
+        plan, result = run_search(inner_dir, minutes, work)
+        (work / "rows.json").write_text(json.dumps(result.rows, indent=1))  # with the trials: for later comparisons
     inner_valid = _inner_valid(plan)
     context = plan.model_config.init_window
     rows = [r for r in result.rows if r["best_valid_nrmse"] is not None]
@@ -122,10 +141,13 @@ def compare(path: Path, minutes: float, work: Path) -> None:
         picks["point mean"] = members
         chosen = select_ensemble([models[i] for i in members], inner_valid, context=context)
         picks["point greedy"] = [members[j] for j in chosen.chosen]
-    print(f"\n## {path.name}: search of {minutes:g} min on the inner split, {len(result.rows)} trials "
-          f"({len(full)} trained to their own stop; further seeds from {time_search.RESEED_AFTER:.2f} of the "
-          f"budget), {time.monotonic() - t0:.0f} s; CPU share "
-          f"{100 * result.usage['cpu_share']:.0f} %")
+        picks["point in order"] = sorted(r["trial"] for r in multi[key])[:MAX_MEMBERS]
+    share = "" if result.usage is None else f"; CPU share {100 * result.usage['cpu_share']:.0f} %"
+    counts = f"{len(result.rows)} trials ({len(full)} trained to their own stop"
+    head = (f"the trials kept in {work}, rescored: {counts})" if rescore else
+            f"search of {minutes:g} min on the inner split, {counts}; further seeds from "
+            f"{time_search.RESEED_AFTER:.2f} of the budget)")
+    print(f"\n## {path.name}: {head}, {time.monotonic() - t0:.0f} s{share}")
     if multi:
         means = sorted((np.mean([r['best_valid_nrmse'] for r in v]), k, len(v)) for k, v in multi.items())
         for mean, k, n in means[:5]:
@@ -133,7 +155,8 @@ def compare(path: Path, minutes: float, work: Path) -> None:
             print(f"point {k}: {n} seeds, inner mean {mean:.4f}, outer mean {np.mean(outs):.4f} "
                   f"(min {min(outs):.4f}, max {max(outs):.4f})")
     print(f"Spearman (inner validation, outer validation) over {len(full)} trials: {rho:.3f}")
-    print(f"the search kept trials {', '.join(map(str, result.members))} ({result.selection})")
+    if result.members is not None:
+        print(f"the search kept trials {', '.join(map(str, result.members))} ({result.selection})")
     print("| rule | trials | inner valid | outer valid (stands in for the test) |")
     print("|---|---|---:|---:|")
     with torch.no_grad():
@@ -141,8 +164,8 @@ def compare(path: Path, minutes: float, work: Path) -> None:
             model, inner_score = ensemble_score([models[i] for i in members], inner_valid, context)
             print(f"| {name} | {', '.join(map(str, members))} | {inner_score:.4f} | "
                   f"{score(model, outer, float64=True, context=context):.4f} |", flush=True)
-        kept = [i for i in result.members if i in models]
-        if kept == list(result.members):
+        kept = [i for i in result.members or () if i in models]
+        if result.members and kept == list(result.members):
             model, inner_score = ensemble_score([models[i] for i in kept], inner_valid, context)
             print(f"| (what the search kept) | {', '.join(map(str, kept))} | {inner_score:.4f} | "
                   f"{score(model, outer, float64=True, context=context):.4f} |")
@@ -169,11 +192,13 @@ def main() -> None:
                    help="the share of the budget after which the search trains further seeds of its best points "
                         "(nnfmu.study.time_search.RESEED_AFTER; default: the search's own; 1: only once every point "
                         "has started, as before)")
+    p.add_argument("--rescore", action="store_true",
+                   help="no new search: compare the rules on the trials an earlier run kept in --work")
     args = p.parse_args()
     if args.reseed_after is not None:
         time_search.RESEED_AFTER = args.reseed_after
     for path in args.datasets:
-        compare(path, args.minutes, args.work / path.name)
+        compare(path, args.minutes, args.work / path.name, args.rescore)
 
 
 if __name__ == "__main__":
