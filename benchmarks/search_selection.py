@@ -146,7 +146,7 @@ def compare(path: Path, minutes: float, work: Path, rescore: bool = False) -> No
     counts = f"{len(result.rows)} trials ({len(full)} trained to their own stop"
     head = (f"the trials kept in {work}, rescored: {counts})" if rescore else
             f"search of {minutes:g} min on the inner split, {counts}; further seeds from "
-            f"{time_search.RESEED_AFTER:.2f} of the budget)")
+            f"{time_search.RESEED_AFTER:.2f} of the budget; halving by {time_search.HALVING_BY})")
     print(f"\n## {path.name}: {head}, {time.monotonic() - t0:.0f} s{share}")
     if multi:
         means = sorted((np.mean([r['best_valid_nrmse'] for r in v]), k, len(v)) for k, v in multi.items())
@@ -155,6 +155,14 @@ def compare(path: Path, minutes: float, work: Path, rescore: bool = False) -> No
             print(f"point {k}: {n} seeds, inner mean {mean:.4f}, outer mean {np.mean(outs):.4f} "
                   f"(min {min(outs):.4f}, max {max(outs):.4f})")
     print(f"Spearman (inner validation, outer validation) over {len(full)} trials: {rho:.3f}")
+    for arch in dict.fromkeys(r["arch"] for r in result.rows):
+        mine = [r for r in result.rows if r["arch"] == arch]
+        scored = [r for r in mine if r["trial"] in models]
+        best = min(scored, key=lambda r: r["best_valid_nrmse"], default=None)
+        at = "" if best is None else (f"; best inner {best['best_valid_nrmse']:.4f} (trial {best['trial']}, outer "
+                                      f"{outer_of[best['trial']]:.4f})")
+        print(f"{arch}: {len(mine)} trials, {sum(r['stopped'] for r in mine)} stopped by successive halving, "
+              f"{sum(r['epochs'] for r in mine)} epochs in all{at}")
     if result.members is not None:
         print(f"the search kept trials {', '.join(map(str, result.members))} ({result.selection})")
     print("| rule | trials | inner valid | outer valid (stands in for the test) |")
@@ -192,11 +200,16 @@ def main() -> None:
                    help="the share of the budget after which the search trains further seeds of its best points "
                         "(nnfmu.study.time_search.RESEED_AFTER; default: the search's own; 1: only once every point "
                         "has started, as before)")
+    p.add_argument("--halving", choices=("arch", "all"), default=None,
+                   help="what successive halving compares a trial with: the trials of its architecture, or all "
+                        "(nnfmu.study.time_search.HALVING_BY; default: the search's own)")
     p.add_argument("--rescore", action="store_true",
                    help="no new search: compare the rules on the trials an earlier run kept in --work")
     args = p.parse_args()
     if args.reseed_after is not None:
         time_search.RESEED_AFTER = args.reseed_after
+    if args.halving is not None:
+        time_search.HALVING_BY = args.halving
     for path in args.datasets:
         compare(path, args.minutes, args.work / path.name, args.rescore)
 

@@ -130,6 +130,21 @@ def test_successive_halving_stops_a_trial_trailing_at_a_rung_and_never_trial_zer
     assert halving.stopped == {3}
 
 
+def test_successive_halving_by_architecture_compares_a_slow_starter_only_with_its_own_kind():
+    from nnfmu.study.trial_pool import Halving
+
+    arch = {1: "gru", 2: "gru", 3: "ss", 4: "ss", 5: "ss"}
+    halving = Halving(grace=3, group=arch.get)
+    assert halving.keep(1, 3, 0.50) and halving.keep(2, 3, 0.40)  # two recurrent networks already below their start
+    assert halving.keep(3, 3, 0.74)  # the first ss there, still at its linear start: not compared with the GRUs
+    assert halving.keep(4, 3, 0.74)  # level with the ss before it
+    assert not halving.keep(5, 3, 0.80)  # trails the ss trials
+    assert halving.stopped == {5}
+    mixed = Halving(grace=3)  # one group: the same ss trials against the GRUs' scores
+    assert mixed.keep(1, 3, 0.50) and mixed.keep(2, 3, 0.40)
+    assert not mixed.keep(3, 3, 0.74)
+
+
 def test_once_every_point_started_the_best_points_that_trained_to_their_stop_train_again_with_further_seeds():
     from nnfmu.study.time_space import again
 
@@ -159,6 +174,29 @@ def test_a_further_seed_of_a_point_trains_to_its_own_stop_as_trial_zero_does():
     for epoch in (3, 6, 12):  # far behind a trial that reached each rung before it, and never stopped
         assert jobs.halving.keep(1, epoch, 0.1) and jobs.halving.keep(3, epoch, 9.0)
     assert 3 not in jobs.halving.stopped
+
+
+def test_halving_by_architecture_compares_a_trial_only_with_its_own_kind_and_all_with_every_trial(monkeypatch):
+    from nnfmu.study import time_search
+    from nnfmu.study.time_search import _Jobs
+
+    ds = dataset(true_system())
+    model, train = ModelConfig(arch="gru", n_u=ds.n_u, n_y=ds.n_y), TrainConfig(epochs=50, patience=10)
+    points = trial_points(model, train, {"lr", "feedback_noise", "truncate"}, 12, seed=0, longest=500)
+
+    def started(halving_by):
+        monkeypatch.setattr(time_search, "HALVING_BY", halving_by)
+        jobs = _Jobs(points, model, train, set(), ds, grace=3)
+        return jobs, [jobs.job(i)["model_config"]["arch"] for i in range(len(points))]
+
+    jobs, arch = started("arch")
+    gru = next(i for i, a in enumerate(arch) if a == "gru" and i > 0)
+    first, second = [i for i, a in enumerate(arch) if a == "lstm"][:2]
+    assert jobs.halving.keep(gru, 3, 0.1) and jobs.halving.keep(first, 3, 0.5)
+    assert jobs.halving.keep(second, 3, 0.5)  # level with the other LSTM, though far behind the GRU
+    mixed, _ = started("all")  # one group, as before
+    assert mixed.halving.keep(gru, 3, 0.1)
+    assert not mixed.halving.keep(first, 3, 0.5) and not mixed.halving.keep(second, 3, 0.5)
 
 
 def test_late_in_the_budget_a_free_core_trains_a_further_seed_of_a_best_point_before_the_next_new_point(

@@ -37,13 +37,16 @@ class Halving:
     """Asynchronous successive halving on the trials' best validation NRMSE so far (lower is better).
 
     The rungs are the epochs ``grace * factor**k``. A trial reaching a rung goes on if its score is within the best
-    ``1 / factor`` of the scores recorded there before it (the first to arrive always goes on), as Ray Tune's
-    ``ASHAScheduler`` decides. The ``exempt`` trials (trial 0: the defaults, trained to their own stop) are recorded
-    and never stopped. ``stopped``: the trials it stopped.
+    ``1 / factor`` of the scores recorded there before it by trials of its group (the first to arrive always goes
+    on), as Ray Tune's ``ASHAScheduler`` decides. ``group``: trial -> its group (the time search: its architecture),
+    so that trials are compared only with trials that learn at the same pace per epoch; None: one group. The
+    ``exempt`` trials (trial 0: the defaults, trained to their own stop) are recorded and never stopped.
+    ``stopped``: the trials it stopped.
     """
 
-    def __init__(self, grace: int, factor: int = 2, exempt=(0,)):
+    def __init__(self, grace: int, factor: int = 2, exempt=(0,), group: Callable[[int], object] | None = None):
         self.grace, self.factor, self.exempt = max(1, int(grace)), factor, set(exempt)
+        self.group = group
         self.rungs: dict = {}
         self.stopped: set = set()
 
@@ -57,7 +60,7 @@ class Halving:
         """Whether ``trial``, at ``epoch`` with best validation NRMSE ``score``, goes on."""
         if not self._is_rung(epoch):
             return True
-        recorded = self.rungs.setdefault(epoch, [])
+        recorded = self.rungs.setdefault((None if self.group is None else self.group(trial), epoch), [])
         cutoff = float(np.percentile(recorded, 100.0 / self.factor)) if recorded else None
         recorded.append(score)
         if trial in self.exempt or cutoff is None or score <= cutoff:
