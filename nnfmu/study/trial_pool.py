@@ -105,8 +105,9 @@ class Trials:
     """What :func:`run_trials` fills as the trials end: ``records`` (trial -> the worker's record, with ``last``: its
     last epoch report), ``started`` (trials 0 .. started-1 were handed to a worker), ``best`` (``(seconds since the
     start, trial, best validation NRMSE)`` each time the search's best so far fell), ``valid_s`` (trial -> the
-    seconds of its last validation free run) and ``scores`` (trial -> its best validation NRMSE so far); ``seconds``: how long the trials ran; ``workers``: process id ->
-    ``(CPU seconds, seconds it waited for a core)`` of each worker, as last read (Linux; empty elsewhere)."""
+    seconds of its last validation free run) and ``scores`` (trial -> its best validation NRMSE so far);
+    ``seconds``: how long the trials ran; ``workers``: process id -> ``(CPU seconds, seconds it waited for a core)``
+    of each worker, as last read (Linux; empty elsewhere)."""
 
     records: dict = field(default_factory=dict)
     started: int = 0
