@@ -68,14 +68,14 @@ MIN_SEEDS = 2  # seeds of one point before the mean of their validation scores r
 #: started. Measured one level down (``benchmarks/search_selection.py --reseed-after``, docs/accuracy.md): 2/3 kept a
 #: worse model on the robot's 10 minutes (outer validation 0.7027 against 0.6844) and the same on the slider's.
 RESEED_AFTER = 1.0
-#: validation free runs of one member the selection makes at most: the best alone, then each round tries every
-#: candidate left as one more member of the ensemble so far
 #: what successive halving compares a trial with at a rung: "all", every trial, or "arch", the trials of its own
 #: architecture (each learns at its own pace per epoch: the ss network leaves its linear start later than the
 #: recurrent ones). Measured one level down (``benchmarks/search_selection.py --halving``, docs/accuracy.md):
 #: "arch" kept a better model on the robot and the F-16 and a worse one on the slider and the valve, 6.5 % worse
 #: on the geometric mean of the outer validation NRMSE.
 HALVING_BY = "all"
+#: validation free runs of one member the selection makes at most: the best alone, then each round tries every
+#: candidate left as one more member of the ensemble so far
 SELECT_RUNS = 1 + sum((MAX_CANDIDATES - r) * (r + 1) for r in range(1, MAX_MEMBERS))
 
 
