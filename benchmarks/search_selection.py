@@ -28,12 +28,14 @@ The rules, each using the inner validation only:
 - ``point in order``: the same point, the ensemble of its first (up to 4) seeds in the order they were trained,
   every one of them: no choice among the seeds at all.
 
-It prints each rule's inner and outer NRMSE, the best trial on the outer validation (which no rule can know), trial
-0 (the defaults), and the Spearman correlation of inner against outer over the trials that trained to their own stop.
-Not part of the tests.
+It prints, per architecture, its trials, how many successive halving stopped, and its best trial; then each rule's
+inner and outer NRMSE, the best trial on the outer validation (which no rule can know), trial 0 (the defaults), and
+the Spearman correlation of inner against outer over the trials that trained to their own stop. ``--halving arch``
+halves each architecture among its own trials (``nnfmu.study.time_search.HALVING_BY``). Not part of the tests.
 
     python benchmarks/search_selection.py data/valve data/robot --minutes 20 --work /tmp/sel
     python benchmarks/search_selection.py data/valve --work /tmp/sel --rescore   # the rules again, on the kept trials
+    python benchmarks/search_selection.py data/robot --minutes 10 --work /tmp/sel --halving arch   # halving per arch
 """
 
 from __future__ import annotations
