@@ -22,26 +22,21 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
-import warnings
 from pathlib import Path
 
 import torch
 
-from nnfmu.errors import FmuBuildError
 from nnfmu.training.compiled_rollout import ENV_SWITCH
 from nnfmu.training.compiled_window import ACTIVATIONS
-from nnfmu.training.rollout_library import REALS, check, compiled, pointers, ptr
+from nnfmu.training.rollout_library import REALS, check, compiled, or_none, pointers, ptr
 
 _C_FILE = Path(__file__).with_name("state_loop.c")
 
 
 @functools.lru_cache(maxsize=None)
 def _library(dtype: torch.dtype) -> ctypes.CDLL | None:
-    try:
-        lib = compiled(dtype, _C_FILE)
-    except (FmuBuildError, OSError) as exc:
-        warnings.warn(f"the ss network's state loop runs in torch instead of compiled C (slower, same values): "
-                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=3)
+    lib = or_none(lambda: compiled(dtype, _C_FILE), "the ss network's state loop")
+    if lib is None:
         return None
     header = [ctypes.c_int] * 6 + [ctypes.c_double]
     lib.nnfmu_ss_forward.argtypes = header + [ctypes.c_void_p] * 8

@@ -10,6 +10,7 @@ import ctypes
 import functools
 import warnings
 from pathlib import Path
+from typing import Callable
 
 import torch
 
@@ -77,15 +78,21 @@ def check(status: int, what: str, B: int, T: int) -> None:
                               "use a smaller batch_size or truncate the trajectories")
 
 
+def or_none(make: Callable[[], ctypes.CDLL], what: str) -> ctypes.CDLL | None:
+    """``make()``, or None with a RuntimeWarning that ``what`` runs in torch, when it cannot be compiled or loaded
+    (callers cache the answer, so the warning comes once)."""
+    try:
+        return make()
+    except (FmuBuildError, OSError) as exc:
+        warnings.warn(f"{what} runs in torch instead of compiled C (slower, same values): "
+                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=5)
+        return None
+
+
 @functools.lru_cache(maxsize=None)
 def library_or_none(dtype: torch.dtype, stem: str = "rollout") -> ctypes.CDLL | None:
     """:func:`library`, or None with a one-time RuntimeWarning when it cannot be compiled or loaded."""
-    try:
-        return library(dtype, stem)
-    except (FmuBuildError, OSError) as exc:
-        warnings.warn(f"the free run runs in torch instead of compiled C (slower, same values): "
-                      f"{str(exc).splitlines()[0]}", RuntimeWarning, stacklevel=3)
-        return None
+    return or_none(lambda: library(dtype, stem), "the free run")
 
 
 def source(c_file: Path) -> str:
