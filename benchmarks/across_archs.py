@@ -43,7 +43,7 @@ def compare(data: Path, work: Path) -> None:
     t0 = time.monotonic()
     valid, test = validation(data), load_dataset(data).test
     seeds = {f"{f.parent.name.removesuffix('.seeds')} {f.stem}": f for f in sorted(work.glob("*.seeds/seed-*.pt"))}
-    cells = {f.stem: f for f in sorted(work.glob("*.pt"))}
+    cells = {f.stem: f for f in sorted(work.glob("*.pt")) if (work / f"{f.stem}.seeds").is_dir()}  # not a search
     if not seeds:
         raise SystemExit(f"no seed checkpoints in {work}/*.seeds: run benchmarks/defaults_table.py first")
     models = {name: model_from_checkpoint(load_checkpoint(f)).eval() for name, f in {**seeds, **cells}.items()}
