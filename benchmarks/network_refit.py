@@ -34,8 +34,8 @@ from nnfmu.metrics import nrmse
 from nnfmu.models import architectures
 from nnfmu.training import TrainConfig, train
 from nnfmu.training.plan import plan_training, valid_fraction
-from nnfmu.training.session import StopTraining
-from nnfmu.training.trainer import _new_model, prepare_dataset
+from nnfmu.training.refit import refit_config, refit_dataset, training_and_validation
+from nnfmu.training.trainer import prepare_dataset
 
 
 def outer_split(ds):
@@ -61,25 +61,24 @@ def inner_plan(inner, arch: str, seed: int, minutes: float):
     return carved, model_config, cfg, linear
 
 
-def refit(carved, inner, model_config, cfg, linear, epochs: int):
-    """Run B: the same network from the same seed on the whole training split for ``epochs``; its final weights.
+def refit(carved, inner, model_config, cfg, linear, epochs: int, variant: str = "scratch", chosen=None):
+    """Run B, as ``nnfmu train --refit`` runs it (:mod:`nnfmu.training.refit`): the same network from the same seed
+    on the whole training split for ``epochs``, its last weights kept.
 
-    train() needs a validation split to log; it gets a copy of the last training trajectory (in-sample, never used
-    to choose: the weights are taken after epoch ``epochs`` whatever it says).
+    ``variant``: 'scratch' (the refit as built); 'ema' (the same with an exponential moving average of the weights,
+    ``average='ema'``: a smoother landing than the last epoch's weights); 'finetune' (from the chosen weights
+    ``chosen``, a fifth of the epochs at a tenth of the learning rate).
     """
-    whole = inner.replace(splits={**inner.splits, "valid": inner.train.subset([inner.train.n_traj - 1])})
-    model = _new_model(model_config, whole, cfg, linear)  # the linear start was refitted on all of it already
-    kept = {}
-
-    def at_epoch(epoch, _metrics):
-        if epoch >= epochs:
-            kept["state"] = copy.deepcopy(model.state_dict())
-            raise StopTraining
-
-    train(whole, model, cfg.replace(epochs=max(epochs, 1), patience=0, max_minutes=None), callback=at_epoch,
-          device="cpu")
-    model.load_state_dict(kept["state"])
-    return model.eval()
+    whole = training_and_validation(inner)
+    stretch = whole.n_samples / carved.train.n_samples
+    run = refit_config(cfg, cfg.seed, epochs, stretch)
+    start = model_config
+    if variant == "ema":
+        run = run.replace(average="ema")
+    elif variant == "finetune":
+        run = run.replace(epochs=max(1, epochs // 5), lr=cfg.lr * 0.1)
+        start = copy.deepcopy(chosen).train()
+    return train(refit_dataset(carved, whole), start, run, linear=linear, device="cpu").model
 
 
 def outer_score(model, split) -> float:
@@ -92,6 +91,9 @@ def main() -> None:
     p.add_argument("--arch", default="gru")
     p.add_argument("--seeds", type=int, default=2)
     p.add_argument("--minutes", type=float, default=5.0, help="time budget of run A (default 5)")
+    p.add_argument("--variant", choices=("scratch", "ema", "finetune"), default="scratch",
+                   help="how run B refits (see refit(); default: scratch, as nnfmu train --refit does)")
+    p.add_argument("--first-seed", type=int, default=0)
     args = p.parse_args()
     print("| dataset | seed | epochs kept | outer validation, no refit | outer validation, refit | CPU s |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -99,12 +101,12 @@ def main() -> None:
         outer = outer_split(load_dataset(path))
         inner = outer.replace(splits={k: v for k, v in outer.splits.items() if k != "valid"})
         wins = []
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             t0 = time.process_time()
             carved, model_config, cfg, linear = inner_plan(inner, args.arch, seed, args.minutes)
             first = train(carved, model_config, cfg, linear=linear, device="cpu")
             plain = outer_score(first.model, outer.valid)
-            second = refit(carved, inner, model_config, cfg, linear, first.best_epoch)
+            second = refit(carved, inner, model_config, cfg, linear, first.best_epoch, args.variant, first.model)
             again = outer_score(second, outer.valid)
             wins.append(again < plain)
             print(f"| {path.name} | {seed} | {first.best_epoch} | {plain:.4f} | {again:.4f} | "

@@ -36,6 +36,16 @@ def valve_small():
 
 
 @pytest.fixture(scope="session")
+def valve_tiny(valve_small):
+    """10 training, 2 validation and one shortened test trajectory of the small valve data."""
+    from nnfmu.data import Trajectories
+
+    tr, te = valve_small.train, valve_small.test
+    return valve_small.replace(splits={"train": tr.subset(range(10)), "valid": tr.subset([10, 11]),
+                                       "test": Trajectories((te.u[0][:400],), (te.y[0][:400],))})
+
+
+@pytest.fixture(scope="session")
 def valve_small_dir(valve_small, tmp_path_factory):
     """``valve_small`` saved as a dataset folder; returns its path."""
     from nnfmu.data import save_dataset

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from nnfmu.data import Trajectories
 from nnfmu.errors import ConfigError
 from nnfmu.models import EnsembleStepModel, ModelConfig, load_checkpoint, load_model
 from nnfmu.training import TrainConfig, train, train_seeds
@@ -19,14 +18,6 @@ from nnfmu.training.horizons import join_sequences, lr_factor, validation_trajec
 from tests.test_training import FAST, TINY
 
 pytestmark = pytest.mark.usefixtures("one_thread")
-
-
-@pytest.fixture(scope="module")
-def valve_tiny(valve_small):
-    """10 training, 2 validation and one shortened test trajectory of the small valve data."""
-    tr, te = valve_small.train, valve_small.test
-    return valve_small.replace(splits={"train": tr.subset(range(10)), "valid": tr.subset([10, 11]),
-                                       "test": Trajectories((te.u[0][:400],), (te.y[0][:400],))})
 
 
 def gru(**options) -> ModelConfig:

@@ -91,15 +91,16 @@ def test_an_ensemble_drops_a_seed_that_never_trained_and_says_so():
     models = [build_model(config).eval() for _ in range(3)]
     rows = [{"seed": s, "best_epoch": e, "best_valid_nrmse": v} for s, e, v in ((0, 4, 0.5), (1, 0, 0.9), (2, 7, 0.6))]
     ds = one_record(200, 50)
-    model, _, notes = seeds_module._ensemble_of_trained(models, rows, ds.test, 1)
-    assert len(model.members) == 2 and torch.equal(model.members[1].net[0].weight, models[2].net[0].weight)
+    model, _, notes, kept = seeds_module._ensemble_of_trained(models, rows, ds.test, 1)
+    assert kept == [0, 2] and len(model.members) == 2 and torch.equal(model.members[1].net[0].weight, models[2].net[0].weight)
     assert any("dropped seed 1" in n and "never improved" in n for n in notes)
-    alone, valid, notes = seeds_module._ensemble_of_trained(models, [dict(r, best_epoch=0) for r in rows], ds.test, 1)
-    assert alone is models[0] and valid == 0.5 and any("kept seed 0 alone" in n for n in notes)
+    alone, valid, notes, kept = seeds_module._ensemble_of_trained(models, [dict(r, best_epoch=0) for r in rows],
+                                                                  ds.test, 1)
+    assert kept == [0] and alone is models[0] and valid == 0.5 and any("kept seed 0 alone" in n for n in notes)
     # an ensemble worse on validation than where the seeds started is not kept: the best seed is
     started = [dict(r, start_valid_nrmse=1e-9) for r in rows]
-    alone, valid, notes = seeds_module._ensemble_of_trained(models, started, ds.test, 1)
-    assert alone is models[0] and valid == 0.5 and any("above the seeds' start" in n for n in notes)
+    alone, valid, notes, kept = seeds_module._ensemble_of_trained(models, started, ds.test, 1)
+    assert kept == [0] and alone is models[0] and valid == 0.5 and any("above the seeds' start" in n for n in notes)
 
 
 @pytest.mark.parametrize("arch", ("gru", "mlp", "tcn"))

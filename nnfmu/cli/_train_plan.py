@@ -35,6 +35,9 @@ from nnfmu.limits import UNBOUNDED_EPOCHS
 #: The fewest seeds the plan trains side by side (when the cores allow at least this many), and the most.
 DEFAULT_SEEDS = 2
 MAX_PLANNED_SEEDS = 8
+#: Whether a seeds run refits its kept seeds on the training and validation data (``--refit``/``--no-refit``;
+#: :mod:`nnfmu.training.refit`).
+REFIT = False
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,7 @@ class TrainRequest:
     seeds: int | None = None
     keep: str | None = None
     jobs: int | None = None
+    refit: bool | None = None
     resume: bool = False
     force: bool = False
     quiet: bool = False
@@ -81,6 +85,7 @@ class TrainPlan:
     device: Any
     linear: Any = None
     seeds: int | None = None
+    refit_on: Any = None
     search: bool = False
     given: frozenset = frozenset()
 
@@ -134,8 +139,10 @@ def make_plan(request: TrainRequest) -> TrainPlan:
     plan = plan.replace(data=ds, model_config=model_config, train_config=train_config, linear=linear,
                         given=frozenset(given_options(request, given)))
     if search_applies(request):  # --max-minutes alone: spent on a search (nnfmu.cli._train_search)
+        _check_refit(request, None)
         return plan.replace(search=True)
-    return plan.replace(seeds=planned_seeds(request, model_config, given, device))
+    seeds = planned_seeds(request, model_config, given, device)
+    return plan.replace(seeds=seeds, refit_on=planned_refit(request, ds, seeds, train_config))
 
 
 def _train_config(request: TrainRequest, stored: dict | None, record):
@@ -292,3 +299,32 @@ def planned_seeds(request: TrainRequest, model_config, given: dict, device) -> i
           "model, one FMU) lowers the validation NRMSE by 1 % or more (--keep ensemble: all of them; --seeds 1: one "
           "network)")
     return seeds
+
+
+def _check_refit(request: TrainRequest, seeds: int | None) -> None:
+    """``--refit`` refits the seeds a seeds run keeps: a ConfigError where there are none."""
+    from nnfmu.errors import ConfigError
+
+    if request.refit and (seeds is None or seeds < 2):
+        raise ConfigError("--refit refits the seeds that a run of several seeds keeps: add --seeds K (K >= 2), or "
+                          "drop --refit")
+
+
+def planned_refit(request: TrainRequest, ds, seeds: int | None, train_config):
+    """The data a seeds run refits its kept seeds on (training and validation together, as loaded: ``ds`` before
+    its validation split was carved), or None: ``--refit``/``--no-refit``, else :data:`REFIT`. Printed."""
+    from nnfmu.training.refit import can_refit, training_and_validation
+
+    _check_refit(request, seeds)
+    wanted = REFIT if request.refit is None else request.refit
+    if not wanted or seeds is None or seeds < 2:
+        return None
+    if not can_refit(train_config):
+        print(f"plan: no refit: the learning-rate schedule {train_config.lr_schedule!r} follows validation, which a "
+              "refit on the validation data has not")
+        return None
+    whole = training_and_validation(ds)
+    print(f"plan: refit: after choosing on validation, the kept seeds train once more on the training and validation "
+          f"data together ({whole.n_samples} samples) for the epochs each kept, and those weights are kept "
+          "(--no-refit: the chosen weights)")
+    return whole

@@ -34,7 +34,7 @@ def run_seeds(plan) -> int:
         result = train_seeds(plan.data, plan.model_config, plan.train_config, seeds=seeds,
                              keep=request.keep or "select", out=out, jobs=request.jobs, progress=plan.progress,
                              device=plan.device, threads=request.threads, linear=plan.linear,
-                             overwrite=request.force)
+                             overwrite=request.force, refit_on=plan.refit_on)
     except (KeyboardInterrupt, Terminated):
         print(_interrupted_seeds(seeds_folder(out)))
         raise

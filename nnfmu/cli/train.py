@@ -28,7 +28,7 @@ from pathlib import Path
 
 from nnfmu.cli import _arch
 from nnfmu.cli._resources import add_resource_options
-from nnfmu.cli._train_plan import TrainPlan, TrainRequest, make_plan
+from nnfmu.cli._train_plan import REFIT, TrainPlan, TrainRequest, make_plan
 from nnfmu.cli._train_search import run_search
 from nnfmu.cli._train_variants import print_test, report_end, run_both_modes, run_seeds
 from nnfmu.training.config import LR_SCHEDULES
@@ -136,6 +136,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "ensemble lowers the validation NRMSE by 1 %%; best: the best on validation alone; "
                             "ensemble: all K (their mean output fed back; one FMU)")
     seeds.add_argument("--jobs", type=int, help="with --seeds: seeds trained at once (default: the usable cores)")
+    seeds.add_argument("--refit", action=argparse.BooleanOptionalAction, default=None,
+                       help="after choosing on validation, train each kept seed once more from its seed on the "
+                            "training and validation data together, for the epochs it kept, into <out stem>.seeds/"
+                            "refit-<s>.pt, and keep those weights (about as long again; the validation score printed "
+                            "is then the one the model was chosen by; default: %s)" % ("on" if REFIT else "off"))
     _arch.add_architecture_options(p)
     p.add_argument("--resume", action="store_true", help="continue the training stored in --out")
     p.add_argument("--force", action="store_true",
@@ -164,7 +169,7 @@ def request(args: argparse.Namespace) -> TrainRequest:
     return TrainRequest(data=args.data, out=Path(args.out), arch=args.arch, strategy=args.strategy,
                         model_options=_given(args, _MODEL_OPTIONS), train_options=train_options,
                         arch_options=_arch.given_values(args), increment=args.increment, linear_path=args.linear_path,
-                        seeds=args.seeds, keep=args.keep, jobs=args.jobs, resume=args.resume, force=args.force,
+                        seeds=args.seeds, keep=args.keep, jobs=args.jobs, refit=args.refit, resume=args.resume, force=args.force,
                         quiet=args.quiet, device=args.device, threads=args.threads)
 
 

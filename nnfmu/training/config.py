@@ -19,6 +19,7 @@ AVERAGES = ("none", "ema", "swa")
 LR_SCHEDULES = ("constant", "cosine", "plateau", "anneal")
 VALID_HORIZONS = ("auto", "split", "joined")
 PHYSICS_SCHEDULES = ("joint", "staged")  # nnfmu.training.physics_schedule
+KEEP_WEIGHTS = ("best", "last")  # "last": a refit (nnfmu.training.refit)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -93,6 +94,10 @@ class TrainConfig:
         When a hybrid's trained physical parameters (``train_physics``) learn: 'joint' with the network from the
         start; 'staged' frozen first, then joint at a tenth of ``lr`` (:mod:`nnfmu.training.physics_schedule`).
         Networks have none; it does not apply to them.
+    keep_weights : {'best', 'last'}
+        Which weights the run keeps: 'best' those of the epoch best on validation (early stopping's); 'last' those
+        of the last epoch, for a refit on the training and validation data together, where the validation score is
+        in-sample and chooses nothing (:mod:`nnfmu.training.refit`).
     """
 
     strategy: str = "parallel"
@@ -117,11 +122,13 @@ class TrainConfig:
     join: bool = False
     valid_horizon: str = "auto"
     physics_schedule: str = "joint"
+    keep_weights: str = "best"
 
     def __post_init__(self) -> None:
         for name, valid in (("strategy", STRATEGIES), ("dtype", DTYPES), ("average", AVERAGES),
                             ("lr_schedule", LR_SCHEDULES), ("valid_horizon", VALID_HORIZONS),
-                            ("physics_schedule", PHYSICS_SCHEDULES)):
+                            ("physics_schedule", PHYSICS_SCHEDULES),
+                            ("keep_weights", KEEP_WEIGHTS)):
             if getattr(self, name) not in valid:
                 raise ConfigError(f"unknown {name} {getattr(self, name)!r}; choose one of {', '.join(valid)}")
         for name in ("average_decay", "average_start", "lr_final"):

@@ -19,27 +19,24 @@ every seed is trained and chosen on the same data.
 
 from __future__ import annotations
 
-import json
 import os
-import signal
-import subprocess
-import sys
-import tempfile
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from nnfmu.data import Dataset, save_dataset
-from nnfmu.errors import CheckpointError, ConfigError, TrainingError
+from nnfmu.data import Dataset, Trajectories
+from nnfmu.errors import ConfigError
 from nnfmu.metrics import NrmseResult
 from nnfmu.models import ModelConfig, StepModel, load_checkpoint, load_model, save_checkpoint
 from nnfmu.training.config import TrainConfig
 from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
-from nnfmu.training.resources import usable_cores
-from nnfmu.training.trainer import _as_train_config, prepare_dataset, train
+from nnfmu.training.refit import refit_kept
+from nnfmu.training.seed_runs import error_file, planned_jobs, train_members
+from nnfmu.training.trainer import _as_train_config, prepare_dataset
 
 KEEP = ("best", "ensemble", "select")
 
@@ -63,6 +60,10 @@ class SeedsResult:
         weights before the failure are used).
     checkpoint : Path
     notes : list of str
+    refit : dict or None
+        With a refit (``refit_on``): the seeds refitted, their epochs and seconds, the samples they trained on, and
+        the chosen model's test scores before the refit (reported only). ``valid_nrmse`` is the score the kept
+        model was chosen by, before the refit: the validation data train the refitted weights.
     """
 
     model: StepModel
@@ -73,6 +74,7 @@ class SeedsResult:
     seeds: list
     checkpoint: Path
     notes: list = field(default_factory=list)
+    refit: dict | None = None
 
     @property
     def test_nrmse(self) -> float | None:
@@ -101,95 +103,10 @@ def _trained(rows: list) -> list[int]:
     return [i for i, r in enumerate(rows) if (r["best_epoch"] or 0) > 0]
 
 
-def _error_file(path: Path) -> Path:
-    """Where a seed whose training failed (e.g. a NaN loss) records why; its best weights so far stay in ``path``."""
-    return path.with_suffix(".error.txt")
-
-
-def _member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str:
-    """'new', 'unfinished' or 'finished' (or failed); ConfigError if the file holds a run of other settings."""
-    if not path.exists():
-        _error_file(path).unlink(missing_ok=True)
-        return "new"
-    try:
-        ckpt = load_checkpoint(path)
-    except CheckpointError:  # a damaged member is trained again
-        path.unlink()
-        return "new"
-    if ckpt.get("model_config") != model_config.to_dict() or ckpt.get("train_config") != cfg.to_dict():
-        raise ConfigError(f"{path} holds a training with other settings; delete {path.parent} or choose another out")
-    done = "stop_reason" in (ckpt.get("summary") or {}) or _error_file(path).exists()
-    return "finished" if done else "unfinished"
-
-
-def _train_one(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
-               device="auto", threads: int | None = None, linear=None) -> str:
-    """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
-    state = _member_state(path, model_config, cfg)
-    if state == "finished":
-        return "done"
-    try:
-        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress,
-                     device=device, threads=threads, linear=linear).stop_reason
-    except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
-        _error_file(path).write_text(f"{exc}\n")
-        return "failed"
-
-
-def _train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None) -> None:
-    """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
-
-    Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard. The workers run
-    in sessions of their own, so a signal to this process (Ctrl-C, SIGTERM) reaches them once, from here: each
-    stops after its epoch and keeps its checkpoint, and the same call continues them.
-    """
-    with tempfile.TemporaryDirectory(prefix="nnfmu-seeds-") as tmp:
-        data = Path(tmp) / "dataset"
-        save_dataset(work[0][0], data)
-        extra = [] if linear is None else [str(linear.save(Path(tmp) / "linear.json"))]
-        env = {**os.environ, "OMP_NUM_THREADS": "1"}
-        pending, running, failed = list(work), [], []
-        try:
-            while pending or running:
-                while pending and len(running) < jobs:
-                    _, model_config, cfg, path, progress = pending.pop(0)
-                    args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
-                            json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
-                            str(threads or 1), str(int(progress)), *extra]
-                    # a worker that shows its progress bar writes it to this process' stderr
-                    running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
-                                                           stderr=None if progress else subprocess.PIPE, text=True,
-                                                           start_new_session=True)))
-                path, proc = running[0]
-                _, err = proc.communicate()
-                running.pop(0)
-                if proc.returncode != 0:
-                    err = (err or "").strip()
-                    failed.append(f"{path.name}: {err.splitlines()[-1] if err else f'exit status {proc.returncode}'}")
-        except BaseException:  # stopped here (Ctrl-C, SIGTERM): the workers stop after their epoch, and keep it
-            for _, proc in running:
-                if proc.poll() is None:
-                    proc.send_signal(signal.SIGINT)
-            for _, proc in running:
-                proc.communicate()
-            raise
-        if failed:
-            raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
-                                "seeds are kept, run the same call again to continue")
-
-
-def _jobs(jobs: int | None, k: int) -> int:
-    if jobs is None:
-        jobs = usable_cores()
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-        raise ConfigError(f"jobs must be a positive integer number of processes, got {jobs!r}")
-    return min(jobs, k)
-
-
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
                 seeds: int = 3, keep: str = "select", out: str | os.PathLike, jobs: int | None = None,
                 progress: bool = False, device="auto", threads: int | None = None, linear=None,
-                overwrite: bool = False) -> SeedsResult:
+                overwrite: bool = False, refit_on: Trajectories | None = None) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
 
     Parameters
@@ -214,6 +131,11 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     overwrite : bool
         Delete a member checkpoint that holds a training of other settings and train it anew (``nnfmu train
         --force``); False: a ConfigError says so.
+    refit_on : Trajectories, optional
+        The training and validation data together (:func:`nnfmu.training.refit.training_and_validation` of the
+        dataset as loaded). After choosing, each kept seed trains once more on them, from its seed, for the epochs
+        it kept, into ``<stem>.seeds/refit-<s>.pt``, and the kept model is made of those (:mod:`nnfmu.training.refit`).
+        None: no refit.
     """
     if keep not in KEEP:
         raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
@@ -227,31 +149,18 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     seed_list = [cfg.seed + i for i in range(seeds)]
     paths = seed_paths(out, seed_list)
     paths[0].parent.mkdir(parents=True, exist_ok=True)
-    n_jobs = _jobs(jobs, seeds)
+    n_jobs = planned_jobs(jobs, seeds)
     work = [(dataset, model_config, cfg.replace(seed=s), p, progress and (n_jobs == 1 or i == 0))
             for i, (s, p) in enumerate(zip(seed_list, paths))]  # side by side, the first seed shows its progress
     if model_config.linear_order and linear is None:
         from nnfmu.linear import LinearConfig, identify_linear
 
         linear = identify_linear(dataset, LinearConfig(order=model_config.linear_order))
-    for _, mc, c, path, _ in work:  # settings clashes are reported (or cleared) here, before any training
-        try:
-            _member_state(path, mc, c)
-        except ConfigError:
-            if not overwrite:
-                raise
-            path.unlink()
-            _error_file(path).unlink(missing_ok=True)
-    if n_jobs == 1:
-        for item in work:
-            if _train_one(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
-                break
-    else:
-        _train_in_processes(work, n_jobs, device, threads, linear)
-    if any(_member_state(p, model_config, c) != "finished" for (_, _, c, p, _) in work):
-        raise KeyboardInterrupt(f"the training of the seeds was stopped; the finished seeds and the unfinished "
-                                f"ones' checkpoints are in {paths[0].parent}: run the same call again to continue")
-    return _keep(dataset, cfg, keep, seed_list, paths, out, notes)
+    train_members(work, n_jobs, device=device, threads=threads, linear=linear, overwrite=overwrite, what="seeds")
+    refit = None if refit_on is None else partial(
+        refit_kept, chosen_on=dataset, whole=refit_on, model_config=model_config, cfg=cfg, folder=paths[0].parent,
+        jobs=jobs, progress=progress, device=device, threads=threads, linear=linear, overwrite=overwrite)
+    return _keep(dataset, cfg, keep, seed_list, paths, out, notes, refit)
 
 
 def _seed_row(seed: int, path: Path) -> dict:
@@ -264,11 +173,12 @@ def _seed_row(seed: int, path: Path) -> dict:
             "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
             "start_valid_nrmse": next((h.get("valid_nrmse") for h in ckpt.get("history", []) if h.get("epoch") == 0),
                                       None),
-            "error": _error_file(path).read_text().strip() if _error_file(path).exists() else None}
+            "error": error_file(path).read_text().strip() if error_file(path).exists() else None}
 
 
-def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list]:
-    """The ensemble of the seeds that improved on their start (best epoch > 0), its validation NRMSE, and notes.
+def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list, list]:
+    """The ensemble of the seeds that improved on their start (best epoch > 0), its validation NRMSE, notes, and
+    the indices of the seeds kept.
 
     A seed whose best epoch is 0 never trained: averaged in, its untrained output would pull the ensemble back
     towards the start (a random network, or the linear model of a linear path). With fewer than two trained
@@ -284,18 +194,18 @@ def _ensemble_of_trained(models: list, rows: list, valid, n: int) -> tuple[StepM
         pool = trained or list(range(len(rows)))
         best = min(pool, key=lambda i: rows[i]["best_valid_nrmse"])
         notes.append(f"fewer than two seeds trained: kept seed {rows[best]['seed']} alone instead of an ensemble")
-        return models[best], rows[best]["best_valid_nrmse"], notes
+        return models[best], rows[best]["best_valid_nrmse"], notes, [best]
     model, score = ensemble_score([models[i] for i in trained], valid, context=n)
     starts = [rows[i]["start_valid_nrmse"] for i in trained if rows[i].get("start_valid_nrmse") is not None]
     if starts and not score <= min(starts):
         best = min(trained, key=lambda i: rows[i]["best_valid_nrmse"])
         notes.append(f"the ensemble's validation NRMSE {score:.4f} is above the seeds' start ({min(starts):.4f}): "
                      f"kept seed {rows[best]['seed']} alone")
-        return models[best], rows[best]["best_valid_nrmse"], notes
-    return model, score, notes
+        return models[best], rows[best]["best_valid_nrmse"], notes, [best]
+    return model, score, notes, trained
 
 
-def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list]:
+def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list, list]:
     """The greedy selection over the seeds that improved on their start (all, if none did), best first."""
     pool = _trained(rows) or list(range(len(rows)))
     pool.sort(key=lambda i: rows[i]["best_valid_nrmse"])
@@ -305,30 +215,43 @@ def _selected(models: list, rows: list, valid, n: int) -> tuple[StepModel, float
     what = f"seed {seeds[0]} alone" if len(seeds) == 1 else f"the ensemble of seeds {', '.join(map(str, seeds))}"
     tried = "" if picked.rejected is None else f": the best ensemble tried scored {picked.rejected:.4f}"
     note = f"kept {what} (validation NRMSE {steps}; {picked.stopped}{tried})"
-    return picked.model, picked.scores[-1], [note]
+    return picked.model, picked.scores[-1], [note], [pool[c] for c in picked.chosen]
 
 
-def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path,
-          notes: list) -> SeedsResult:
+def _chosen(keep: str, models: list, rows: list, valid, n: int) -> tuple[StepModel, float, list, list]:
+    """``(kept model, its validation NRMSE, notes, indices of the seeds it holds)`` by the rule ``keep``."""
+    if keep == "best":
+        best = min(range(len(rows)), key=lambda i: rows[i]["best_valid_nrmse"])
+        return models[best], rows[best]["best_valid_nrmse"], [f"kept seed {rows[best]['seed']} (lowest validation "
+                                                              "NRMSE)"], [best]
+    if keep == "select":
+        return _selected(models, rows, valid, n)
+    return _ensemble_of_trained(models, rows, valid, n)
+
+
+def _keep(dataset: Dataset, cfg: TrainConfig, keep: str, seed_list: list, paths: list, out: Path, notes: list,
+          refit=None) -> SeedsResult:
+    """Choose on validation, refit the kept seeds where ``refit`` (:func:`nnfmu.training.refit.refit_kept` with
+    everything but the choice bound) is given, and write the kept model to ``out``."""
     rows = [_seed_row(s, p) for s, p in zip(seed_list, paths)]
     models = [load_model(p) for p in paths]
     valid, valid_notes = validation_trajectories(dataset, cfg)
     n = models[0].config.init_window
-    if keep == "best":
-        best = min(range(len(rows)), key=lambda i: rows[i]["best_valid_nrmse"])
-        model, valid_nrmse = models[best], rows[best]["best_valid_nrmse"]
-        notes = notes + [f"kept seed {rows[best]['seed']} (lowest validation NRMSE)"]
-    elif keep == "select":
-        model, valid_nrmse, chosen = _selected(models, rows, valid, n)
-        notes = notes + chosen
-    else:
-        model, valid_nrmse, dropped = _ensemble_of_trained(models, rows, valid, n)
-        notes = notes + dropped
+    model, valid_nrmse, chosen, kept = _chosen(keep, models, rows, valid, n)
+    notes = notes + chosen
+    refitted = None
+    if refit is not None:
+        chosen_model, (model, refitted, more) = model, refit(model, kept, rows)
+        notes = notes + more
+        if refitted is not None and "test" in dataset.splits:  # reported only, as every test score
+            before = free_run_nrmse(chosen_model, dataset.test, float64=True)
+            refitted["chosen_test_nrmse"] = None if before is None else before.mean
     test = free_run_nrmse(model, dataset.test, float64=True) if "test" in dataset.splits else None
     window = free_run_nrmse(model, dataset.test, float64=True, context=n) if n > 1 and test is not None else None
     summary = {"best_valid_nrmse": valid_nrmse, "test_nrmse": None if test is None else test.mean,
                "test_nrmse_window": None if window is None else window.mean, "stop_reason": "seeds",
-               "keep": keep, "seeds": rows, "valid_samples": valid.n_samples, "notes": notes + valid_notes}
+               "keep": keep, "seeds": rows, "valid_samples": valid.n_samples, "notes": notes + valid_notes,
+               "refit": refitted}
     save_checkpoint(out, model, train_config=cfg.to_dict(), history=[], best_epoch=None, summary=summary)
     model = load_model(out)
-    return SeedsResult(model, keep, valid_nrmse, test, window, rows, out, notes + valid_notes)
+    return SeedsResult(model, keep, valid_nrmse, test, window, rows, out, notes + valid_notes, refitted)

@@ -26,11 +26,11 @@ def main(argv: list[str]) -> int:
     from nnfmu.linear import load_linear
     from nnfmu.models import ModelConfig
     from nnfmu.training.config import TrainConfig
-    from nnfmu.training.ensemble import _train_one
+    from nnfmu.training.seed_runs import train_member
 
     data, model_json, train_json, out, device, threads, progress, *linear = argv
     start = load_linear(linear[0]) if linear else None  # the linear path's start (ModelConfig.linear_order > 0)
-    _train_one(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
+    train_member(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
                TrainConfig.from_dict(json.loads(train_json)), Path(out), progress == "1", device=device,
                threads=int(threads), linear=start)
     return 0

@@ -170,9 +170,10 @@ class Session:
             return score(self.model, self.valid, context=self.context + 1)
 
     def record(self, train_loss: float | None, valid_nrmse: float, seconds: float, partial: bool) -> dict:
-        """Append the epoch's metrics, update the best weights and the early-stopping counter."""
+        """Append the epoch's metrics, update the kept weights (the best, or the last: ``keep_weights``) and the
+        early-stopping counter."""
         improved = valid_nrmse < self.best_score
-        if improved:
+        if improved or self.cfg.keep_weights == "last":
             self.best_score, self.best_epoch = valid_nrmse, self.epoch
             with self.average.applied():
                 self.best_state = state_snapshot(self.model)

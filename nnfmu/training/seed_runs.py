@@ -1,0 +1,135 @@
+"""Training members one after the other or side by side: the seeds of :func:`nnfmu.training.train_seeds` and
+their refits (:mod:`nnfmu.training.refit`).
+
+Each member is a normal resumable :func:`~nnfmu.training.train` into its own checkpoint. A finished member is not
+trained again, an unfinished one resumes, and one whose file holds a training of other settings is reported
+(:func:`member_state`). Side by side, each member trains in a fresh interpreter
+(``python -m nnfmu.training.seed_worker``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from nnfmu.data import Dataset, save_dataset
+from nnfmu.errors import CheckpointError, ConfigError, TrainingError
+from nnfmu.models import ModelConfig, load_checkpoint
+from nnfmu.training.config import TrainConfig
+from nnfmu.training.resources import usable_cores
+from nnfmu.training.trainer import train
+
+
+def error_file(path: Path) -> Path:
+    """Where a seed whose training failed (e.g. a NaN loss) records why; its best weights so far stay in ``path``."""
+    return path.with_suffix(".error.txt")
+
+
+def member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str:
+    """'new', 'unfinished' or 'finished' (or failed); ConfigError if the file holds a run of other settings."""
+    if not path.exists():
+        error_file(path).unlink(missing_ok=True)
+        return "new"
+    try:
+        ckpt = load_checkpoint(path)
+    except CheckpointError:  # a damaged member is trained again
+        path.unlink()
+        return "new"
+    if ckpt.get("model_config") != model_config.to_dict() or ckpt.get("train_config") != cfg.to_dict():
+        raise ConfigError(f"{path} holds a training with other settings; delete {path.parent} or choose another out")
+    done = "stop_reason" in (ckpt.get("summary") or {}) or error_file(path).exists()
+    return "finished" if done else "unfinished"
+
+
+def train_member(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
+               device="auto", threads: int | None = None, linear=None) -> str:
+    """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
+    state = member_state(path, model_config, cfg)
+    if state == "finished":
+        return "done"
+    try:
+        return train(dataset, model_config, cfg, out=path, resume=state == "unfinished", progress=progress,
+                     device=device, threads=threads, linear=linear).stop_reason
+    except TrainingError as exc:  # the seed keeps its best weights before the failure, and says why
+        error_file(path).write_text(f"{exc}\n")
+        return "failed"
+
+
+def train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None) -> None:
+    """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
+
+    Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard. The workers run
+    in sessions of their own, so a signal to this process (Ctrl-C, SIGTERM) reaches them once, from here: each
+    stops after its epoch and keeps its checkpoint, and the same call continues them.
+    """
+    with tempfile.TemporaryDirectory(prefix="nnfmu-seeds-") as tmp:
+        data = Path(tmp) / "dataset"
+        save_dataset(work[0][0], data)
+        extra = [] if linear is None else [str(linear.save(Path(tmp) / "linear.json"))]
+        env = {**os.environ, "OMP_NUM_THREADS": "1"}
+        pending, running, failed = list(work), [], []
+        try:
+            while pending or running:
+                while pending and len(running) < jobs:
+                    _, model_config, cfg, path, progress = pending.pop(0)
+                    args = [sys.executable, "-m", "nnfmu.training.seed_worker", str(data),
+                            json.dumps(model_config.to_dict()), json.dumps(cfg.to_dict()), str(path), str(device),
+                            str(threads or 1), str(int(progress)), *extra]
+                    # a worker that shows its progress bar writes it to this process' stderr
+                    running.append((path, subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL,
+                                                           stderr=None if progress else subprocess.PIPE, text=True,
+                                                           start_new_session=True)))
+                path, proc = running[0]
+                _, err = proc.communicate()
+                running.pop(0)
+                if proc.returncode != 0:
+                    err = (err or "").strip()
+                    failed.append(f"{path.name}: {err.splitlines()[-1] if err else f'exit status {proc.returncode}'}")
+        except BaseException:  # stopped here (Ctrl-C, SIGTERM): the workers stop after their epoch, and keep it
+            for _, proc in running:
+                if proc.poll() is None:
+                    proc.send_signal(signal.SIGINT)
+            for _, proc in running:
+                proc.communicate()
+            raise
+        if failed:
+            raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
+                                "seeds are kept, run the same call again to continue")
+
+
+def planned_jobs(jobs: int | None, k: int) -> int:
+    if jobs is None:
+        jobs = usable_cores()
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"jobs must be a positive integer number of processes, got {jobs!r}")
+    return min(jobs, k)
+
+
+def train_members(work: list, jobs: int, *, device, threads: int | None, linear, overwrite: bool, what: str) -> None:
+    """Train every member of ``work`` (``(dataset, model_config, cfg, path, progress)`` each) that is not finished.
+
+    Settings clashes are reported (``overwrite``: cleared) before any training. Raises KeyboardInterrupt when a
+    member was stopped (Ctrl-C, SIGTERM): the same call continues it. ``what`` names the members in that message.
+    """
+    for _, mc, c, path, _ in work:
+        try:
+            member_state(path, mc, c)
+        except ConfigError:
+            if not overwrite:
+                raise
+            path.unlink()
+            error_file(path).unlink(missing_ok=True)
+    if jobs == 1:
+        for item in work:
+            if train_member(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
+                break
+    else:
+        train_in_processes(work, jobs, device, threads, linear)
+    if any(member_state(p, mc, c) != "finished" for (_, mc, c, p, _) in work):
+        raise KeyboardInterrupt(f"the training of the {what} was stopped; the finished {what} and the unfinished "
+                                f"ones' checkpoints are in {work[0][3].parent}: run the same call again to continue")
