@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from nnfmu.errors import ConfigError
 from nnfmu.models import EnsembleStepModel, ModelConfig, load_checkpoint
 from nnfmu.training import TrainConfig, train, train_seeds
 from nnfmu.training.refit import refit_dataset, training_and_validation
@@ -95,3 +96,17 @@ def test_nnfmu_train_refits_its_kept_seeds_on_request_and_refuses_where_there_ar
     summary = load_checkpoint(out)["summary"]
     assert summary["refit"]["seeds"] and all((tmp_path / "m.seeds" / f"refit-{s}.pt").exists()
                                              for s in summary["refit"]["seeds"])
+
+
+def test_seeds_written_before_the_refit_existed_are_taken_as_finished_not_as_other_settings(valve_tiny, tmp_path):
+    from nnfmu.training.seed_runs import member_state
+
+    cfg = TrainConfig(**{**FAST, "epochs": 1})
+    path = tmp_path / "seed-0.pt"
+    train(valve_tiny, gru(), cfg, out=path)
+    ckpt = load_checkpoint(path)
+    del ckpt["train_config"]["keep_weights"]  # as written before TrainConfig had it
+    torch.save(ckpt, path)
+    assert member_state(path, gru(), cfg) == "finished"
+    with pytest.raises(ConfigError, match="other settings"):
+        member_state(path, gru(), cfg.replace(keep_weights="last"))

@@ -108,6 +108,7 @@ def error_file(ckpt: Path) -> Path:
 
 def _resumable(ckpt: Path, inputs: tuple[Path, ...], model_config, train_config) -> bool:
     from nnfmu.models import load_checkpoint
+    from nnfmu.training.seed_runs import same_train_config
 
     if not ckpt.exists() or any(p.exists() and p.stat().st_mtime > ckpt.stat().st_mtime for p in inputs):
         return False
@@ -116,7 +117,7 @@ def _resumable(ckpt: Path, inputs: tuple[Path, ...], model_config, train_config)
     except CheckpointError:
         return False
     return (stored.get("resume") is not None and stored.get("model_config") == model_config.to_dict()
-            and stored.get("train_config") == train_config.to_dict())
+            and same_train_config(stored.get("train_config"), train_config))
 
 
 def train_network(data_dir: Path, arch: str, strategy: str, hyper: Hyper, budget: Budget, seed: int,

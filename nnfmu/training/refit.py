@@ -91,8 +91,7 @@ def refit_kept(chosen, kept: list, rows: list, *, chosen_on: Dataset, whole: Tra
              progress and k == 0) for k, i in enumerate(todo)]
     train_members(work, planned_jobs(jobs, len(work)), device=device, threads=threads, linear=linear,
                   overwrite=overwrite, what="refits")
-    members = [load_model(paths[i]) if i in paths else None for i in kept]
-    members = [m if m is not None else load_model(rows[i]["checkpoint"]) for m, i in zip(members, kept)]
+    members = [load_model(paths.get(i, rows[i]["checkpoint"])) for i in kept]  # an untrained seed: as chosen
     model = members[0] if len(members) == 1 else EnsembleStepModel.from_members(members).eval()
     runs = [load_checkpoint(paths[i]) for i in todo]
     summary = {"seeds": [rows[i]["seed"] for i in todo], "epochs": [rows[i]["best_epoch"] for i in todo],

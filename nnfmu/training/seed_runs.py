@@ -30,6 +30,12 @@ def error_file(path: Path) -> Path:
     return path.with_suffix(".error.txt")
 
 
+def same_train_config(stored: dict | None, cfg: TrainConfig) -> bool:
+    """Whether a checkpoint's stored training settings are ``cfg``'s. A setting added since it was written (absent
+    from ``stored``) counts at its default, which is what the code that wrote it did."""
+    return stored is not None and {**TrainConfig().to_dict(), **stored} == cfg.to_dict()
+
+
 def member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str:
     """'new', 'unfinished' or 'finished' (or failed); ConfigError if the file holds a run of other settings."""
     if not path.exists():
@@ -40,7 +46,7 @@ def member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str
     except CheckpointError:  # a damaged member is trained again
         path.unlink()
         return "new"
-    if ckpt.get("model_config") != model_config.to_dict() or ckpt.get("train_config") != cfg.to_dict():
+    if ckpt.get("model_config") != model_config.to_dict() or not same_train_config(ckpt.get("train_config"), cfg):
         raise ConfigError(f"{path} holds a training with other settings; delete {path.parent} or choose another out")
     done = "stop_reason" in (ckpt.get("summary") or {}) or error_file(path).exists()
     return "finished" if done else "unfinished"
