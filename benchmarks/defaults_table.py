@@ -46,10 +46,13 @@ def _nnfmu(*args: str, log: Path | None = None) -> float:
     return _cpu() - before
 
 
-def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reuse_linear: bool = False) -> dict:
+def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reuse_linear: bool = False,
+                reuse_seeds: bool = False) -> dict:
     """Train, export and score every cell of one dataset; returns {name: (test NRMSE, CPU s)}.
 
-    ``reuse_linear``: keep a ``linear.fmu`` already in ``work`` (its CPU seconds then read NaN).
+    ``reuse_linear``: keep a ``linear.fmu`` already in ``work`` (its CPU seconds then read NaN). ``reuse_seeds``:
+    keep each cell's ``ARCH.seeds/seed-*.pt`` (the training finds them finished and only chooses, and refits where
+    the defaults refit; the CPU seconds are then those of that step alone).
     """
     work.mkdir(parents=True, exist_ok=True)
     fmus, cpu = {}, {}
@@ -62,7 +65,11 @@ def run_dataset(data: Path, archs: list[str], work: Path, extra: list[str], reus
     for arch in archs:
         ckpt = work / f"{arch}.pt"
         ckpt.unlink(missing_ok=True)
-        shutil.rmtree(work / f"{arch}.seeds", ignore_errors=True)  # the plan's seeds train anew, not resumed
+        if reuse_seeds:  # the refits go: they are made from the seeds by today's rule
+            for old in (work / f"{arch}.seeds").glob("refit-*"):
+                old.unlink()
+        else:
+            shutil.rmtree(work / f"{arch}.seeds", ignore_errors=True)  # the plan's seeds train anew, not resumed
         chosen = [] if arch == "search" else ["--arch", arch]
         cpu[arch] = _nnfmu("train", "--data", str(data), *chosen, "-o", str(ckpt), "--quiet", *extra,
                            log=work / f"{arch}.log")
@@ -110,6 +117,10 @@ def main(argv=None) -> int:
     p.add_argument("--max-minutes", type=float, help="the time budget of every training (default: none)")
     p.add_argument("--reuse-linear", action="store_true",
                    help="keep the linear.fmu of an earlier run in the work folder instead of identifying it again")
+    p.add_argument("--refit", action="store_true", help="add --refit to every training (nnfmu.training.refit)")
+    p.add_argument("--reuse-seeds", action="store_true",
+                   help="keep every cell's seeds of an earlier run in the work folder: only what follows them (the "
+                        "choice, the refit) runs again")
     args = p.parse_args(argv)
     if args.archs is None:
         from nnfmu.models.architectures import search_order
@@ -118,9 +129,10 @@ def main(argv=None) -> int:
     if "search" in args.archs and args.max_minutes is None:
         p.error("the 'search' cell needs --max-minutes (the search's time budget)")
     extra = [] if args.max_minutes is None else ["--max-minutes", str(args.max_minutes)]
+    extra += ["--refit"] if args.refit else []
     print("| dataset | model | test NRMSE (fmpy) | / linear | CPU s |\n|---|---|---|---|---|", flush=True)
     for data in args.datasets:
-        rows = run_dataset(data, args.archs, args.work / data.name, extra, args.reuse_linear)
+        rows = run_dataset(data, args.archs, args.work / data.name, extra, args.reuse_linear, args.reuse_seeds)
         base = rows["linear"][0]
         for name, (score, seconds) in rows.items():
             print(f"| {data.name} | {name} | {score:.4f} | {score / base:.3f} | {seconds:.0f} |", flush=True)

@@ -45,9 +45,10 @@ def test_the_refit_is_each_kept_seed_trained_again_on_training_and_validation_da
     # the validation score reported is the one the model was chosen by: the refit has seen the validation data
     assert result.valid_nrmse == chosen["best_valid_nrmse"]
     assert result.refit["chosen_test_nrmse"] == pytest.approx(chosen["test_nrmse"], rel=1e-9)
-    # the same network from the same seed, trained on all of it for the chosen epochs, its last weights kept
-    again = train(refit_dataset(valve_tiny, whole), gru(),
-                  cfg.replace(seed=chosen["seed"], epochs=chosen["best_epoch"], patience=0, keep_weights="last"))
+    # the same network from the same seed, trained on all of it for the chosen epochs, landing on the moving average
+    # of its weights
+    again = train(refit_dataset(valve_tiny, whole), gru(), cfg.replace(
+        seed=chosen["seed"], epochs=chosen["best_epoch"], patience=0, keep_weights="last", average="ema"))
     assert _same_weights(result.model, again.model)
     assert result.test_nrmse == pytest.approx(again.test_nrmse, rel=1e-9)
     refit_file = tmp_path / "r.seeds" / f"refit-{chosen['seed']}.pt"
