@@ -20,7 +20,7 @@ from nnfmu.errors import FmuBuildError
 
 PACKAGE = Path(nnfmu.__file__).parent
 #: Modules that start processes other than the C compiler, with what they start.
-OTHER_PROCESSES = {"training/ensemble.py": "nnfmu train, one process per ensemble member",
+OTHER_PROCESSES = {"training/seed_runs.py": "nnfmu train, one process per seed or refit",
                    "study/trial_pool.py": "nnfmu train --max-minutes, one worker process per core"}
 
 
