@@ -14,7 +14,9 @@ parallel processes where there are cores), each a normal resumable :func:`train`
 
 The result lists every seed's validation and test scores, so the spread over seeds is reported
 next to the kept model's. The validation split is fixed once (carved with the base seed), so
-every seed is trained and chosen on the same data.
+every seed is trained and chosen on the same data. With ``refit_on``, the kept seeds then train once
+more on the training and validation data together, and the kept model is made of those
+(:mod:`nnfmu.training.refit`).
 """
 
 from __future__ import annotations

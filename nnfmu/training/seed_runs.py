@@ -66,7 +66,7 @@ def train_member(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, 
         return "failed"
 
 
-def train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None) -> None:
+def train_in_processes(work: list, jobs: int, device, threads: int | None, linear=None, what: str = "seeds") -> None:
     """Train the members in ``jobs`` worker processes at once (``python -m nnfmu.training.seed_worker``).
 
     Fresh interpreters, not ``multiprocessing``: the caller's script needs no ``__main__`` guard. The workers run
@@ -104,8 +104,8 @@ def train_in_processes(work: list, jobs: int, device, threads: int | None, linea
                 proc.communicate()
             raise
         if failed:
-            raise TrainingError(f"training of {len(failed)} seed(s) failed: {'; '.join(failed)}; the finished "
-                                "seeds are kept, run the same call again to continue")
+            raise TrainingError(f"training of {len(failed)} of the {what} failed: {'; '.join(failed)}; the finished "
+                                f"{what} are kept, run the same call again to continue")
 
 
 def planned_jobs(jobs: int | None, k: int) -> int:
@@ -135,7 +135,7 @@ def train_members(work: list, jobs: int, *, device, threads: int | None, linear,
             if train_member(*item, device=device, threads=threads, linear=linear) in ("SIGINT", "SIGTERM"):
                 break
     else:
-        train_in_processes(work, jobs, device, threads, linear)
+        train_in_processes(work, jobs, device, threads, linear, what)
     if any(member_state(p, mc, c) != "finished" for (_, mc, c, p, _) in work):
         raise KeyboardInterrupt(f"the training of the {what} was stopped; the finished {what} and the unfinished "
                                 f"ones' checkpoints are in {work[0][3].parent}: run the same call again to continue")
