@@ -111,3 +111,22 @@ def test_seeds_written_before_the_refit_existed_are_taken_as_finished_not_as_oth
     assert member_state(path, gru(), cfg) == "finished"
     with pytest.raises(ConfigError, match="other settings"):
         member_state(path, gru(), cfg.replace(keep_weights="last"))
+
+
+def test_the_plan_refits_on_the_record_as_loaded_not_on_its_carved_pieces(tmp_path, capsys):
+    """One training record: the validation tail is cut from it for choosing, and the refit trains on it whole."""
+    import numpy as np
+
+    from nnfmu.cli._train_plan import TrainRequest, make_plan
+    from nnfmu.data import from_arrays, save_dataset
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(500, 1))
+    y = np.cumsum(u, axis=0) * 0.01
+    data = save_dataset(from_arrays(Ts=0.1, u_train=[u[:400]], y_train=[y[:400]], u_test=[u[400:]],
+                                    y_test=[y[400:]]), tmp_path / "d")
+    plan = make_plan(TrainRequest(data=str(data), out=tmp_path / "m.pt", arch="gru", seeds=2, refit=True,
+                                  linear_path="off"))
+    assert plan.data.train.n_samples < 400 and plan.data.valid is not None  # chosen on the carved head
+    assert plan.refit_on.n_traj == 1 and np.array_equal(plan.refit_on.y[0], y[:400])
+    assert "plan: refit: after choosing on validation" in capsys.readouterr().out

@@ -137,6 +137,7 @@ def make_plan(request: TrainRequest) -> TrainPlan:
     if out.exists():
         _check_ours(out)
     given = dict(request.train_options)
+    loaded = ds  # before its validation split is carved: what a refit trains on
     ds, model_config, train_config, linear = prepare(ds, model_config, train_config, given,
                                                      linear_path=request.linear_path, increment=request.increment)
     plan = plan.replace(data=ds, model_config=model_config, train_config=train_config, linear=linear,
@@ -145,7 +146,7 @@ def make_plan(request: TrainRequest) -> TrainPlan:
         _check_refit(request, None)
         return plan.replace(search=True)
     seeds = planned_seeds(request, model_config, given, device)
-    return plan.replace(seeds=seeds, refit_on=planned_refit(request, ds, seeds, train_config))
+    return plan.replace(seeds=seeds, refit_on=planned_refit(request, loaded, seeds, train_config))
 
 
 def _train_config(request: TrainRequest, stored: dict | None, record):
