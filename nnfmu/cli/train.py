@@ -169,8 +169,8 @@ def request(args: argparse.Namespace) -> TrainRequest:
     return TrainRequest(data=args.data, out=Path(args.out), arch=args.arch, strategy=args.strategy,
                         model_options=_given(args, _MODEL_OPTIONS), train_options=train_options,
                         arch_options=_arch.given_values(args), increment=args.increment, linear_path=args.linear_path,
-                        seeds=args.seeds, keep=args.keep, jobs=args.jobs, refit=args.refit, resume=args.resume, force=args.force,
-                        quiet=args.quiet, device=args.device, threads=args.threads)
+                        seeds=args.seeds, keep=args.keep, jobs=args.jobs, refit=args.refit, resume=args.resume,
+                        force=args.force, quiet=args.quiet, device=args.device, threads=args.threads)
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -31,8 +31,8 @@ def main(argv: list[str]) -> int:
     data, model_json, train_json, out, device, threads, progress, *linear = argv
     start = load_linear(linear[0]) if linear else None  # the linear path's start (ModelConfig.linear_order > 0)
     train_member(load_dataset(data), ModelConfig.from_dict(json.loads(model_json)),
-               TrainConfig.from_dict(json.loads(train_json)), Path(out), progress == "1", device=device,
-               threads=int(threads), linear=start)
+                 TrainConfig.from_dict(json.loads(train_json)), Path(out), progress == "1", device=device,
+                 threads=int(threads), linear=start)
     return 0
 
 
