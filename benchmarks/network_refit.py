@@ -24,7 +24,6 @@ mean of refit / no refit over the seeds. Not part of the tests.
 from __future__ import annotations
 
 import argparse
-import copy
 import time
 from pathlib import Path
 
@@ -63,26 +62,21 @@ def inner_plan(inner, arch: str, seed: int, minutes: float):
     return carved, model_config, cfg, linear
 
 
-VARIANTS = ("ema", "last", "finetune")
+VARIANTS = ("ema", "last")
 
 
-def refit(carved, inner, model_config, cfg, linear, epochs: int, variant: str = "ema", chosen=None):
+def refit(carved, inner, model_config, cfg, linear, epochs: int, variant: str = "ema"):
     """Run B, as ``nnfmu train --refit`` runs it (:mod:`nnfmu.training.refit`): the same network from the same seed
     on the whole training split for ``epochs``, landing on an exponential moving average of its weights.
 
-    ``variant``: 'ema' (the refit as built); 'last' (the last epoch's weights, not averaged, as first measured);
-    'finetune' (from the chosen weights ``chosen``, a fifth of the epochs at a tenth of the learning rate).
+    ``variant``: 'ema' (the refit as built); 'last' (the last epoch's weights, not averaged, as first measured).
     """
     whole = training_and_validation(inner)
     stretch = whole.n_samples / carved.train.n_samples
     run = refit_config(cfg, cfg.seed, epochs, stretch)
-    start = model_config
     if variant == "last":
         run = run.replace(average=cfg.average)
-    elif variant == "finetune":
-        run = run.replace(epochs=max(1, epochs // 5), lr=cfg.lr * 0.1)
-        start = copy.deepcopy(chosen).train()
-    return train(refit_dataset(carved, whole), start, run, linear=linear, device="cpu").model
+    return train(refit_dataset(carved, whole), model_config, run, linear=linear, device="cpu").model
 
 
 def outer_score(model, split) -> float:
@@ -114,8 +108,8 @@ def main() -> None:
             plain = outer_score(first.model, outer.valid)
             scores = []
             for v in args.variants:
-                scores.append(outer_score(refit(carved, inner, model_config, cfg, linear, first.best_epoch, v,
-                                                first.model), outer.valid))
+                scores.append(outer_score(refit(carved, inner, model_config, cfg, linear, first.best_epoch, v),
+                                          outer.valid))
                 ratios[v].append(scores[-1] / plain)
             print(f"| {path.name} | {seed} | {first.best_epoch} | {plain:.4f} | "
                   f"{' | '.join(f'{x:.4f}' for x in scores)} | {time.process_time() - t0:.0f} |", flush=True)

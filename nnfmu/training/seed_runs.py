@@ -53,8 +53,8 @@ def member_state(path: Path, model_config: ModelConfig, cfg: TrainConfig) -> str
 
 
 def train_member(dataset: Dataset, model_config: ModelConfig, cfg: TrainConfig, path: Path, progress: bool,
-               device="auto", threads: int | None = None, linear=None) -> str:
-    """Train (or resume, or skip) one seed; returns its stop reason ('done' if it was finished before)."""
+                 device="auto", threads: int | None = None, linear=None) -> str:
+    """Train (or resume, or skip) one member; returns its stop reason ('done' if it was finished before)."""
     state = member_state(path, model_config, cfg)
     if state == "finished":
         return "done"
@@ -109,6 +109,7 @@ def train_in_processes(work: list, jobs: int, device, threads: int | None, linea
 
 
 def planned_jobs(jobs: int | None, k: int) -> int:
+    """Processes training ``k`` members at once: ``jobs``, or the usable cores, at most ``k``."""
     if jobs is None:
         jobs = usable_cores()
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
