@@ -177,39 +177,45 @@ def test_the_train_cli_says_join_no_join_or_nothing():
 
 def test_train_cli_at_its_defaults_trains_a_seed_per_core_and_keeps_them_by_validation_alone(tmp_path, capsys,
                                                                                                monkeypatch):
-    """With the budget left to the plan and a core idle, one seed per core trains at once; the kept model is the seed
-    best on validation, joined by the other only where their ensemble is 1 % better on validation (issue 38: never
-    chosen on test); --seeds 1 and --epochs train one."""
-    from nnfmu.cli import main
-    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS, TrainRequest, planned_seeds
+    """With the budget left to the plan and a core idle, one seed per core trains at once, and further waves while the
+    plan's minutes allow (up to the most it trains); the kept model is the seed best on validation, joined by others
+    only where their ensemble is 1 % better on validation (issue 38: never chosen on test); --seeds 1 and --epochs
+    train one."""
+    from nnfmu.cli import _train_plan, main
+    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS, TrainRequest, planned_seeds, planned_waves
     from nnfmu.data import save_dataset
     from nnfmu.models import ModelConfig, load_checkpoint
     from nnfmu.training import resources
-
-    data = save_dataset(one_record(300, 100), tmp_path / "d")
-    base = ["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--patience", "1", "--quiet"]
-    monkeypatch.setattr(resources, "usable_cores", lambda: 2)
-    assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
-    out = capsys.readouterr().out
-    assert "plan: seeds: 2 trained side by side" in out
-    assert "kept the ensemble of 2 seeds:" in out or "alone (of 2 seeds):" in out  # what the checkpoint holds
-    assert sorted(p.name for p in (tmp_path / "a.seeds").iterdir()) == ["seed-0.pt", "seed-1.pt"]
-    summary = load_checkpoint(tmp_path / "a.pt")["summary"]
-    assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1]
-    trained = [r for r in summary["seeds"] if r["best_epoch"] > 0] or summary["seeds"]
-    best = min(r["best_valid_nrmse"] for r in trained)
-    members = load_checkpoint(tmp_path / "a.pt")["model_config"]["members"]
-    averaged = any("kept the ensemble of seeds" in n for n in summary["notes"])
-    assert members == (2 if averaged else 1)
-    assert summary["best_valid_nrmse"] <= (0.99 * best if averaged else best) + 1e-9  # the margin, on validation
-    assert summary["best_valid_nrmse"] <= min(r["start_valid_nrmse"] for r in summary["seeds"]) + 1e-9
 
     at_defaults = TrainRequest(data="d", out=tmp_path / "b.pt", threads=1)  # `nnfmu train` at its defaults
     for cores, seeds in ((16, MAX_PLANNED_SEEDS), (5, 5), (2, 2), (1, None)):
         monkeypatch.setattr(resources, "usable_cores", lambda: cores)
         assert planned_seeds(at_defaults, ModelConfig(arch="gru", n_u=1, n_y=1), {}, None) == seeds
+        # further waves within the plan's minutes, where there are fewer seeds than the most
+        within = planned_waves(at_defaults, seeds, 10.0)
+        assert within == (600.0 if seeds is not None and seeds < MAX_PLANNED_SEEDS else None)
+    assert planned_waves(at_defaults.replace(seeds=2), 2, 10.0) is None  # --seeds K: K seeds
     capsys.readouterr()
+
+    data = save_dataset(one_record(300, 100), tmp_path / "d")
+    base = ["train", "--data", str(data), "--arch", "mlp", "--hidden", "4", "--patience", "1", "--quiet"]
     monkeypatch.setattr(resources, "usable_cores", lambda: 2)
+    monkeypatch.setattr(_train_plan, "MAX_PLANNED_SEEDS", 4)  # two waves of two on this tiny record
+    assert main([*base, "-o", str(tmp_path / "a.pt")]) == 0
+    out = capsys.readouterr().out
+    assert "plan: seeds: 2 trained side by side" in out and "then 2 more at a time" in out and "up to 4" in out
+    assert "trained 4 seeds in 2 wave(s) of up to 2 side by side" in out
+    assert "kept the ensemble of" in out or "alone (of 4 seeds):" in out  # what the checkpoint holds
+    assert sorted(p.name for p in (tmp_path / "a.seeds").iterdir()) == [f"seed-{s}.pt" for s in range(4)]
+    summary = load_checkpoint(tmp_path / "a.pt")["summary"]
+    assert summary["keep"] == "select" and [r["seed"] for r in summary["seeds"]] == [0, 1, 2, 3]
+    trained = [r for r in summary["seeds"] if r["best_epoch"] > 0] or summary["seeds"]
+    best = min(r["best_valid_nrmse"] for r in trained)
+    members = load_checkpoint(tmp_path / "a.pt")["model_config"]["members"]
+    averaged = any("kept the ensemble of seeds" in n for n in summary["notes"])
+    assert (members > 1) == averaged
+    assert summary["best_valid_nrmse"] <= (0.99 * best if averaged else best) + 1e-9  # the margin, on validation
+    assert summary["best_valid_nrmse"] <= min(r["start_valid_nrmse"] for r in summary["seeds"]) + 1e-9
     from nnfmu.cli.info import describe, render
 
     shown = " ".join(render(describe(tmp_path / "a.pt")).split())  # nnfmu info: each seed in a few words

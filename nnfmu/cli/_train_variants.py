@@ -28,13 +28,15 @@ def run_seeds(plan) -> int:
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
     from nnfmu.cli import Terminated
+    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS
     from nnfmu.training.ensemble import seeds_folder
 
     try:
         result = train_seeds(plan.data, plan.model_config, plan.train_config, seeds=seeds,
                              keep=request.keep or "select", out=out, jobs=request.jobs, progress=plan.progress,
                              device=plan.device, threads=request.threads, linear=plan.linear,
-                             overwrite=request.force, refit_on=plan.refit_on)
+                             overwrite=request.force, refit_on=plan.refit_on, more_within=plan.more_seeds_within,
+                             most=MAX_PLANNED_SEEDS)
     except (KeyboardInterrupt, Terminated):
         print(_interrupted_seeds(seeds_folder(out)))
         raise
@@ -44,7 +46,8 @@ def run_seeds(plan) -> int:
         test = "n/a" if r["test_nrmse"] is None else f"{r['test_nrmse']:.4f}"
         print(f"seed {r['seed']}: validation NRMSE {r['best_valid_nrmse']:.4f}, test {test}, {r['stop_reason']}")
     spread = result.spread()
-    print(f"kept {_kept(result, seeds)}: validation free-run NRMSE {result.valid_nrmse:.4f}; checkpoint {out}")
+    print(f"kept {_kept(result, len(result.seeds))}: validation free-run NRMSE {result.valid_nrmse:.4f}; "
+          f"checkpoint {out}")
     if result.test is not None:
         print_test(plan.data, result.test, result.test_window, plan.model_config.init_window)
         print(f"the seeds' own test NRMSE: mean {spread['mean']:.4f}, min {spread['min']:.4f}, max {spread['max']:.4f}")

@@ -128,7 +128,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     seeds = p.add_argument_group("seeds (several trainings of the same network)")
     seeds.add_argument("--seeds", type=int, metavar="K",
                        help="train K seeds (--seed, +1, ...) into <out stem>.seeds/ and write the kept model to --out "
-                            "(default: one per usable core, at least 2 and at most 8, side by side, when the plan "
+                            "(default: one per usable core, at least 2 and at most 8, side by side, then further "
+                            "waves while the plan's minutes leave room for one more, up to 8 in all, when the plan "
                             "chooses the budget, no --epochs or --max-minutes, and a core is idle beside the "
                             "training, else 1; --seeds 1: one network)")
     seeds.add_argument("--keep", choices=["select", "best", "ensemble"],

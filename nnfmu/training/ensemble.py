@@ -37,7 +37,7 @@ from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
 from nnfmu.training.refit import refit_kept
-from nnfmu.training.seed_runs import error_file, planned_jobs, train_members
+from nnfmu.training.seed_runs import error_file, further_seeds, planned_jobs, train_members, training_seconds
 from nnfmu.training.trainer import _as_train_config, prepare_dataset
 
 KEEP = ("best", "ensemble", "select")
@@ -108,7 +108,8 @@ def _trained(rows: list) -> list[int]:
 def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: TrainConfig | None = None, *,
                 seeds: int = 3, keep: str = "select", out: str | os.PathLike, jobs: int | None = None,
                 progress: bool = False, device="auto", threads: int | None = None, linear=None,
-                overwrite: bool = False, refit_on: Trajectories | None = None) -> SeedsResult:
+                overwrite: bool = False, refit_on: Trajectories | None = None, more_within: float | None = None,
+                most: int | None = None) -> SeedsResult:
     """Train ``model_config`` from ``seeds`` seeds (``train_config.seed``, +1, ...) and keep the best or the ensemble.
 
     Parameters
@@ -138,6 +139,11 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
         dataset as loaded). After choosing, each kept seed trains once more on them, from its seed, for the epochs
         it kept, into ``<stem>.seeds/refit-<s>.pt``, and the kept model is made of those (:mod:`nnfmu.training.refit`).
         None: no refit.
+    more_within, most : float (seconds), int, optional
+        With ``more_within``: after the K seeds, further waves of as many seeds as train at once (``jobs``) train
+        while the waves so far leave room for one more within ``more_within`` wall seconds, up to ``most`` seeds
+        in all (:func:`~nnfmu.training.seed_runs.further_seeds`); a note says how many and why they ended. The
+        choice is made over every seed trained. None: the K seeds only.
     """
     if keep not in KEEP:
         raise ConfigError(f"unknown keep {keep!r}; choose one of {', '.join(KEEP)}")
@@ -149,20 +155,43 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
     dataset, notes = prepare_dataset(dataset, cfg)  # one validation split for every seed
     out = Path(out)
     seed_list = [cfg.seed + i for i in range(seeds)]
-    paths = seed_paths(out, seed_list)
-    paths[0].parent.mkdir(parents=True, exist_ok=True)
+    seeds_folder(out).mkdir(parents=True, exist_ok=True)
     n_jobs = planned_jobs(jobs, seeds)
-    work = [(dataset, model_config, cfg.replace(seed=s), p, progress and (n_jobs == 1 or i == 0))
-            for i, (s, p) in enumerate(zip(seed_list, paths))]  # side by side, the first seed shows its progress
     if model_config.linear_order and linear is None:
         from nnfmu.linear import LinearConfig, identify_linear
 
         linear = identify_linear(dataset, LinearConfig(order=model_config.linear_order))
-    train_members(work, n_jobs, device=device, threads=threads, linear=linear, overwrite=overwrite, what="seeds")
+
+    def wave(wave_seeds: list) -> None:  # side by side, the first seed of the wave shows its progress
+        work = [(dataset, model_config, cfg.replace(seed=s), p, progress and (n_jobs == 1 or i == 0))
+                for i, (s, p) in enumerate(zip(wave_seeds, seed_paths(out, wave_seeds)))]
+        train_members(work, n_jobs, device=device, threads=threads, linear=linear, overwrite=overwrite, what="seeds")
+
+    wave(seed_list)
+    if more_within is not None:
+        seed_list, waves_note = _further_waves(wave, seed_list, out, n_jobs, most or seeds, more_within)
+        notes = notes + [waves_note]
+    paths = seed_paths(out, seed_list)
     refit = None if refit_on is None else partial(
         refit_kept, chosen_on=dataset, whole=refit_on, model_config=model_config, cfg=cfg, folder=paths[0].parent,
         jobs=jobs, progress=progress, device=device, threads=threads, linear=linear, overwrite=overwrite)
     return _keep(dataset, cfg, keep, seed_list, paths, out, notes, refit)
+
+
+def _further_waves(wave, seed_list: list, out: Path, per_wave: int, most: int, within: float) -> tuple[list, str]:
+    """Train further waves of seeds (``wave(seeds)``) while :func:`~nnfmu.training.seed_runs.further_seeds` allows:
+    ``(every seed trained, a note on the waves)``."""
+    waves = [list(seed_list)]
+    while True:
+        walls = [max(training_seconds(p) for p in seed_paths(out, w)) for w in waves]
+        k, why = further_seeds(walls, per_wave, len(seed_list), most, within)
+        if not k:
+            return seed_list, (f"trained {len(seed_list)} seeds in {len(waves)} wave(s) of up to {per_wave} side by "
+                               f"side, {sum(walls) / 60:.1f} minutes of training; no further wave: {why}")
+        more = [seed_list[-1] + 1 + i for i in range(k)]
+        wave(more)
+        waves.append(more)
+        seed_list = seed_list + more
 
 
 def _seed_row(seed: int, path: Path) -> dict:

@@ -140,3 +140,26 @@ def train_members(work: list, jobs: int, *, device, threads: int | None, linear,
     if any(member_state(p, mc, c) != "finished" for (_, mc, c, p, _) in work):
         raise KeyboardInterrupt(f"the training of the {what} was stopped; the finished {what} and the unfinished "
                                 f"ones' checkpoints are in {work[0][3].parent}: run the same call again to continue")
+
+
+def training_seconds(path: Path) -> float:
+    """The wall seconds a member's training took, from its checkpoint's history (its epochs, validation included)."""
+    return float(sum(h.get("seconds", 0.0) for h in load_checkpoint(path).get("history", [])))
+
+
+def further_seeds(walls: list, per_wave: int, have: int, most: int, within: float) -> tuple[int, str]:
+    """How many seeds the next wave trains (0: none), and why the waves end when they do.
+
+    ``walls``: each wave's wall seconds so far (its slowest member's :func:`training_seconds`: the wave's members
+    train side by side); ``per_wave``: the members trained at once; ``have``: the seeds trained; ``most``: the most in
+    all; ``within``: the wall seconds the waves may take together. The next wave is expected to take as long as the
+    slowest so far, and trains only where it would end within ``within``. The measured seconds, not a clock, decide,
+    so a stopped run that is run again trains the same waves.
+    """
+    spent, expected = sum(walls), max(walls, default=0.0)
+    if have >= most:
+        return 0, f"the most the plan trains ({most})"
+    if spent + expected > within:
+        return 0, (f"another wave, at the slowest one's {expected / 60:.1f} minutes, would end after the "
+                   f"{within / 60:g} minutes")
+    return min(per_wave, most - have), ""
