@@ -92,6 +92,7 @@ class TrainPlan:
     seeds: int | None = None
     refit_on: Any = None
     more_seeds_within: float | None = None  # wall seconds for further waves of seeds (the plan's seeds), else None
+    most_seeds: int = MAX_PLANNED_SEEDS  # the most seeds those waves bring the run to
     search: bool = False
     given: frozenset = frozenset()
 
@@ -150,7 +151,8 @@ def make_plan(request: TrainRequest) -> TrainPlan:
         return plan.replace(search=True)
     seeds = planned_seeds(request, model_config, given, device, train_config.max_minutes)
     return plan.replace(seeds=seeds, refit_on=planned_refit(request, loaded, seeds, train_config),
-                        more_seeds_within=planned_waves(request, seeds, train_config.max_minutes))
+                        more_seeds_within=planned_waves(request, seeds, train_config.max_minutes),
+                        most_seeds=MAX_PLANNED_SEEDS)
 
 
 def _train_config(request: TrainRequest, stored: dict | None, record):

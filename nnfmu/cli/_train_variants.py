@@ -28,7 +28,6 @@ def run_seeds(plan) -> int:
         raise ConfigError("--seeds resumes by itself (finished seeds are kept, unfinished ones continue): "
                           "drop --resume and run the same command again")
     from nnfmu.cli import Terminated
-    from nnfmu.cli._train_plan import MAX_PLANNED_SEEDS
     from nnfmu.training.ensemble import seeds_folder
 
     try:
@@ -36,7 +35,7 @@ def run_seeds(plan) -> int:
                              keep=request.keep or "select", out=out, jobs=request.jobs, progress=plan.progress,
                              device=plan.device, threads=request.threads, linear=plan.linear,
                              overwrite=request.force, refit_on=plan.refit_on, more_within=plan.more_seeds_within,
-                             most=MAX_PLANNED_SEEDS)
+                             most=plan.most_seeds)
     except (KeyboardInterrupt, Terminated):
         print(_interrupted_seeds(seeds_folder(out)))
         raise
