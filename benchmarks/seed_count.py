@@ -53,8 +53,8 @@ def train_seeds_cli(inner_dir: Path, arch: str, seeds: int, out: Path) -> None:
 
 
 def kept(models: list, inner: list, valid, context: int, group: list) -> object:
-    """The model ``--keep select`` keeps from the seeds ``group`` (indices): best on the inner validation first,
-    joined greedily (only seeds that improved on their start, as the rule takes them)."""
+    """The model ``--keep select`` keeps from the seeds ``group`` (indices; the caller leaves out those that never
+    improved on their start, as the rule does): best on the inner validation first, joined greedily."""
     pool = sorted(group, key=lambda i: inner[i])
     return select_ensemble([models[i] for i in pool], valid, context=context, max_members=len(pool)).model
 

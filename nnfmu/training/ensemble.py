@@ -37,7 +37,8 @@ from nnfmu.training.ensemble_select import ensemble_score, select_ensemble
 from nnfmu.training.evaluate import free_run_nrmse
 from nnfmu.training.horizons import validation_trajectories
 from nnfmu.training.refit import refit_kept
-from nnfmu.training.seed_runs import error_file, further_seeds, planned_jobs, train_members, training_seconds
+from nnfmu.training.seed_runs import (error_file, further_seeds, history_seconds, planned_jobs, train_members,
+                                      training_seconds)
 from nnfmu.training.trainer import _as_train_config, prepare_dataset
 
 KEEP = ("best", "ensemble", "select")
@@ -181,16 +182,15 @@ def train_seeds(dataset: Dataset, model_config: ModelConfig, train_config: Train
 def _further_waves(wave, seed_list: list, out: Path, per_wave: int, most: int, within: float) -> tuple[list, str]:
     """Train further waves of seeds (``wave(seeds)``) while :func:`~nnfmu.training.seed_runs.further_seeds` allows:
     ``(every seed trained, a note on the waves)``."""
-    waves = [list(seed_list)]
+    walls = [max(training_seconds(p) for p in seed_paths(out, seed_list))]  # each wave's, read once it is trained
     while True:
-        walls = [max(training_seconds(p) for p in seed_paths(out, w)) for w in waves]
         k, why = further_seeds(walls, per_wave, len(seed_list), most, within)
         if not k:
-            return seed_list, (f"trained {len(seed_list)} seeds in {len(waves)} wave(s) of up to {per_wave} side by "
+            return seed_list, (f"trained {len(seed_list)} seeds in {len(walls)} wave(s) of up to {per_wave} side by "
                                f"side, {sum(walls) / 60:.1f} minutes of training; no further wave: {why}")
         more = [seed_list[-1] + 1 + i for i in range(k)]
         wave(more)
-        waves.append(more)
+        walls.append(max(training_seconds(p) for p in seed_paths(out, more)))
         seed_list = seed_list + more
 
 
@@ -201,7 +201,7 @@ def _seed_row(seed: int, path: Path) -> dict:
             "test_nrmse": summary.get("test_nrmse"), "test_nrmse_window": summary.get("test_nrmse_window"),
             "best_epoch": ckpt.get("best_epoch"), "epochs_run": summary.get("epochs_run"),
             "stop_reason": summary.get("stop_reason") or "failed",
-            "seconds": float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", []))),
+            "seconds": history_seconds(ckpt),
             "start_valid_nrmse": next((h.get("valid_nrmse") for h in ckpt.get("history", []) if h.get("epoch") == 0),
                                       None),
             "error": error_file(path).read_text().strip() if error_file(path).exists() else None}

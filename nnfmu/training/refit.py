@@ -84,7 +84,7 @@ def refit_kept(chosen, kept: list, rows: list, *, chosen_on: Dataset, whole: Tra
     kept seed trained, ``chosen`` is returned with a note saying why.
     """
     from nnfmu.models import EnsembleStepModel, load_checkpoint, load_model
-    from nnfmu.training.seed_runs import planned_jobs, train_members
+    from nnfmu.training.seed_runs import history_seconds, planned_jobs, train_members
 
     if not can_refit(cfg):
         return chosen, None, [f"no refit: the learning-rate schedule {cfg.lr_schedule!r} follows the validation "
@@ -104,7 +104,7 @@ def refit_kept(chosen, kept: list, rows: list, *, chosen_on: Dataset, whole: Tra
     runs = [load_checkpoint(paths[i]) for i in todo]
     summary = {"seeds": [rows[i]["seed"] for i in todo], "epochs": [rows[i]["best_epoch"] for i in todo],
                "stop_reasons": [(r.get("summary") or {}).get("stop_reason") for r in runs],
-               "seconds": [float(sum(h.get("seconds", 0.0) for h in r.get("history", []))) for r in runs],
+               "seconds": [history_seconds(r) for r in runs],
                "train_samples": int(whole.n_samples), "chosen_train_samples": int(chosen_on.train.n_samples)}
     short = [f"seed {s}: {e} epochs, {t:.0f} s" for s, e, t in zip(summary["seeds"], summary["epochs"],
                                                                      summary["seconds"])]

@@ -142,9 +142,14 @@ def train_members(work: list, jobs: int, *, device, threads: int | None, linear,
                                 f"ones' checkpoints are in {work[0][3].parent}: run the same call again to continue")
 
 
+def history_seconds(ckpt: dict) -> float:
+    """The wall seconds a loaded checkpoint's training took: its history's epochs, validation included."""
+    return float(sum(h.get("seconds", 0.0) for h in ckpt.get("history", [])))
+
+
 def training_seconds(path: Path) -> float:
-    """The wall seconds a member's training took, from its checkpoint's history (its epochs, validation included)."""
-    return float(sum(h.get("seconds", 0.0) for h in load_checkpoint(path).get("history", [])))
+    """:func:`history_seconds` of the member checkpoint at ``path``."""
+    return history_seconds(load_checkpoint(path))
 
 
 def further_seeds(walls: list, per_wave: int, have: int, most: int, within: float) -> tuple[int, str]:
