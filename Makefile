@@ -12,11 +12,17 @@ STAMP  := $(VENV)/.nnfmu-installed
 # setup: the project in .venv, and the system packages the test suite runs FMU binaries with
 setup: $(STAMP) system-packages
 
+PROJECT := -e '.[dev,tune,search]'
+# A registry can fail for a moment: each install is tried a second time after a pause, without --quiet, so that
+# a lasting failure prints pip's own reason.
+PIP_INSTALL = $(PY) -m pip install --quiet $(1) || { echo "make setup: pip install $(1) failed; trying once more in 20 s"; \
+	sleep 20; $(PY) -m pip install $(1); }
+
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e '.[dev,tune,search]'
+	$(call PIP_INSTALL,--upgrade pip)
+	$(call PIP_INSTALL,torch==2.13.0)
+	$(call PIP_INSTALL,$(PROJECT))
 	touch $(STAMP)
 
 demo: $(STAMP)
