@@ -15,8 +15,8 @@ setup: $(STAMP) system-packages
 PROJECT := -e '.[dev,tune,search]'
 # A registry can fail for a moment: each install is tried a second time after a pause, without --quiet, so that
 # a lasting failure prints pip's own reason.
-PIP_INSTALL = $(PY) -m pip install --quiet $(1) || { echo "make setup: pip install $(1) failed; trying once more in 20 s"; \
-	sleep 20; $(PY) -m pip install $(1); }
+PIP_INSTALL = $(PY) -m pip install --quiet $(1) || \
+	{ echo "make setup: pip install $(1) failed; trying once more in 20 s"; sleep 20; $(PY) -m pip install $(1); }
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)

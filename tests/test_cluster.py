@@ -11,6 +11,10 @@ from nnfmu.cli import main
 from nnfmu.study import get_budget, reproduce
 
 # one network and the baselines: the same cells as the session's smoke study, for a fraction of its time
+#: The same float32 training in two processes: the compiled free run and torch's agree to rounding, and a process
+#: runs torch's where its C library is unavailable (seen once in a full suite on a fresh machine: 1.5e-7 apart after
+#: 2 epochs). Another configuration, seed or length differs by far more.
+SAME_TRAINING = 1e-6
 GRU_ONLY = get_budget("valve", "smoke").replace(archs=("gru",), strategies=("parallel",))
 
 
@@ -62,12 +66,12 @@ def test_tune_on_a_loopback_cluster_with_asha_reports_the_best(cluster, valve_sm
         local = train(load_dataset(valve_small_dir), hyper.model_config("gru", 2, 2),
                       hyper.train_config(strategy="parallel", epochs=trial["epochs"], patience=0, seed=0,
                                          max_minutes=None), device="cpu")
-        assert trial["best_valid_nrmse"] == pytest.approx(local.best_valid_nrmse, rel=1e-9)
+        assert trial["best_valid_nrmse"] == pytest.approx(local.best_valid_nrmse, rel=SAME_TRAINING)
 
 
 def test_smoke_study_as_ray_tasks_equals_the_local_run(cluster, smoke_study, tmp_path):
     out = tmp_path / "study"
     result = reproduce("valve", out, budget=GRU_ONLY, address=cluster.address, progress=False, echo=None)
     local = _scores(smoke_study[1].results)
-    assert _scores(result.results) == pytest.approx({k: local[k] for k in _scores(result.results)}, rel=1e-9)
+    assert _scores(result.results) == pytest.approx({k: local[k] for k in _scores(result.results)}, rel=SAME_TRAINING)
     assert (out / "fmus" / "gru-parallel.fmu").is_file() and (out / "results.md").is_file()

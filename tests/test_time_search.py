@@ -282,7 +282,9 @@ def test_a_search_keeps_a_model_no_worse_on_validation_than_trial_zero_the_defau
     assert {r["seed"] for r in rows} == {train.seed}
     assert (rows[0]["lr"], rows[0]["epochs"], rows[0]["status"], rows[0]["stopped"]) == (3e-3, 12, "epochs", False)
     plain = train_network(ds, model, train, device="cpu", threads=1)  # trial 0 is this training, in a worker
-    assert rows[0]["best_valid_nrmse"] == pytest.approx(plain.best_valid_nrmse, rel=1e-12)
+    # to float32 rounding: the compiled free run and torch's agree to it, and a process runs torch's where its C
+    # library is unavailable (seen once in a full suite: 7e-8 apart); another learning rate differs by far more
+    assert rows[0]["best_valid_nrmse"] == pytest.approx(plain.best_valid_nrmse, rel=1e-6)
     assert result.best_valid_nrmse <= rows[0]["best_valid_nrmse"]
     ckpt = load_checkpoint(out)
     assert ckpt["summary"]["best_valid_nrmse"] == result.best_valid_nrmse
