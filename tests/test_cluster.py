@@ -75,3 +75,20 @@ def test_smoke_study_as_ray_tasks_equals_the_local_run(cluster, smoke_study, tmp
     local = _scores(smoke_study[1].results)
     assert _scores(result.results) == pytest.approx({k: local[k] for k in _scores(result.results)}, rel=SAME_TRAINING)
     assert (out / "fmus" / "gru-parallel.fmu").is_file() and (out / "results.md").is_file()
+
+
+def test_without_an_address_a_local_instance_starts_beside_a_running_cluster_and_leaves_it_running(cluster,
+                                                                                                     monkeypatch):
+    """With a cluster running on this machine (``ray start`` records it; ``RAY_ADDRESS`` names it), ``nnfmu tune``
+    without --address raised Ray's ValueError (num_cpus given while joining a cluster). It starts its own instance
+    with the CPUs it asks for, and the user's cluster runs on.
+
+    Last in this module: a local instance started in this process before a study on the cluster made the cluster's
+    tasks fail with Ray's OwnerDiedError (before this change too)."""
+    from nnfmu.study.ray_connect import ray_session
+
+    monkeypatch.setenv("RAY_ADDRESS", cluster.address)
+    with ray_session(num_cpus=3, quiet=True) as ray:
+        assert ray.cluster_resources()["CPU"] == 3 and len(ray.nodes()) == 1  # not the cluster's 2 nodes of 1 CPU
+    assert not ray.is_initialized()
+    assert all(node.remaining_processes_alive() for node in cluster.list_all_nodes())

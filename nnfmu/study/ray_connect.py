@@ -10,6 +10,11 @@ its GCS forever (13 minutes measured before giving up; issue 12).
 :func:`connect` checks first whether the cluster answers on the loopback
 address; if it does, it connects there and registers the driver as 127.0.0.1.
 An address where nothing answers is one clear error instead of a hang.
+
+Without an address, :func:`ray_session` starts a local instance of its own (``ray.init(address="local")``) even where
+a cluster runs on this machine (``ray start``, or ``RAY_ADDRESS`` set): ``ray.init()`` would join that cluster, and
+with ``num_cpus`` given it refused to (``ValueError: When connecting to an existing cluster, num_cpus and num_gpus
+must not be provided``). ``--address`` is how nnfmu joins a cluster.
 """
 
 from __future__ import annotations
@@ -100,8 +105,8 @@ def ray_session(address: str | None = None, num_cpus: int | None = None, num_gpu
             gpus = {} if cuda_visible is None else {"CUDA_VISIBLE_DEVICES": cuda_visible}
             with mock.patch.object(services, "resolve_ip_for_localhost", _keep_loopback), \
                     mock.patch.dict(os.environ, gpus):
-                ray.init(num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus, include_dashboard=False,
-                         log_to_driver=False, _node_ip_address="127.0.0.1",
+                ray.init(address="local", num_cpus=num_cpus or os.cpu_count(), num_gpus=num_gpus,
+                         include_dashboard=False, log_to_driver=False, _node_ip_address="127.0.0.1",
                          logging_level=logging.WARNING if quiet else logging.INFO)
         started = True
     try:

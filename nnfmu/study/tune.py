@@ -15,8 +15,8 @@ and trains on ``device`` with ``gpus_per_trial`` GPUs (default: from the device,
 The point with the lowest mean best-validation NRMSE wins.
 
 Ray is the optional extra ``tune`` (``pip install "nnfmu[tune]"``, or
-``pip install "ray[tune]"``). By default a local Ray instance is started
-(``ray.init(num_cpus=..., include_dashboard=False)``) and stopped again; with
+``pip install "ray[tune]"``). By default a local Ray instance of its own is started, even beside a cluster running
+on this machine (``ray.init(address="local", num_cpus=..., include_dashboard=False)``), and stopped again; with
 ``address`` the search runs on an existing cluster, whose workers must have
 nnfmu installed. The dataset travels to the workers through Ray's object
 store, so no shared file system is needed for the data.
