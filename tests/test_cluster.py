@@ -10,11 +10,11 @@ import pytest
 from nnfmu.cli import main
 from nnfmu.study import get_budget, reproduce
 
-# one network and the baselines: the same cells as the session's smoke study, for a fraction of its time
 #: The same float32 training in two processes: the compiled free run and torch's agree to rounding, and a process
 #: runs torch's where its C library is unavailable (seen once in a full suite on a fresh machine: 1.5e-7 apart after
 #: 2 epochs). Another configuration, seed or length differs by far more.
 SAME_TRAINING = 1e-6
+# one network and the baselines: the same cells as the session's smoke study, for a fraction of its time
 GRU_ONLY = get_budget("valve", "smoke").replace(archs=("gru",), strategies=("parallel",))
 
 
