@@ -43,7 +43,8 @@ def test_the_halves_are_the_records_alternately_or_one_record_cut_at_its_middle(
     assert validation_halves(one, context=n // 2 - 1) is not None
 
 
-def test_where_the_best_network_on_one_half_is_the_worst_on_the_other_the_average_is_kept(data, linear):  # noqa: F811
+def test_where_the_best_network_on_one_half_is_the_worst_on_the_other_the_average_carries_better(
+        data, linear):  # noqa: F811
     """Networks biased up, down and not at all, on a validation whose even records read 0.3 output standard
     deviations high and whose odd ones read as much low: each half prefers the network biased its way, which is the
     worst on the other half; their average, the unbiased network, is level on both."""
@@ -60,7 +61,7 @@ def test_where_the_best_network_on_one_half_is_the_worst_on_the_other_the_averag
     assert rel(average.simulate(u, y[0]), path_model("gru", data, linear).simulate(u, y[0])) < 1e-9
 
 
-def test_where_validation_ranks_the_networks_alike_on_both_halves_the_selection_is_kept(data, linear):  # noqa: F811
+def test_where_both_halves_rank_the_networks_alike_the_selection_carries_better(data, linear):  # noqa: F811
     plain, up, further = (shifted(path_model("gru", data, linear), by) for by in (0.0, 0.3, 0.6))
     check = cross_check([plain, up, further], data.valid)
     assert check.members == (1, 1) and not check.averages
