@@ -13,9 +13,9 @@ or only give the choice more lucky draws, is decided without the test split, as 
   (``--keep select`` on the inner validation); each kept model is scored on the outer validation (free run from
   y0, float64). A K's figure is the geometric mean over its groups, so K = 2 averages N/2 draws, K = N one.
 - ``all K averaged`` is the ensemble of every seed of the group (``--keep ensemble`` without its start check);
-- ``auto`` is a rule measured and not adopted (docs/accuracy.md): the greedy selection or that average, whichever
-  scores lower on the halves of the inner validation, each rule chosen on one half and scored on the other
-  (``cross_check``); its column says which it kept in each group.
+- ``cross-checked`` is a rule measured and not adopted (docs/accuracy.md): the greedy selection or that average,
+  whichever scores lower on the halves of the inner validation, each rule chosen on one half and scored on the
+  other (``cross_check``); its column says which it kept in each group.
 
 The test split is not read. It prints every seed's inner and outer NRMSE, their Spearman correlation, and the
 table of K. The seeds are kept in ``--work`` (the same call continues them). Not part of the tests.
@@ -88,12 +88,12 @@ def compare(path: Path, archs: list, n: int, work: Path) -> None:
         print("seeds (inner / outer): " + ", ".join(f"{r['seed']}: {a:.4f} / {b:.4f}"
                                                    for r, a, b in zip(rows, inner, outer_of)))
         print("| seeds a group (K) | groups | select: outer valid (geometric mean) | select: members | "
-              "all K averaged: outer valid | auto: outer valid | auto kept |")
+              "all K averaged: outer valid | cross-checked: outer valid | cross-checked kept |")
         print("|---:|---:|---:|---|---:|---:|---|")
         k = 1
         while k <= n:
             groups = [list(range(g, g + k)) for g in range(0, n - k + 1, k)]
-            sel, avg, auto, sizes, which = [], [], [], [], []
+            sel, avg, checked, sizes, which = [], [], [], [], []
             with torch.no_grad():
                 for g in groups:
                     pool = [i for i in g if i in improved] or g
@@ -104,11 +104,11 @@ def compare(path: Path, archs: list, n: int, work: Path) -> None:
                                      float64=True, context=context))
                     check = cross_check([models[i] for i in pool], valid, context=context)
                     averages = check is not None and check.averages
-                    auto.append(avg[-1] if averages else sel[-1])
+                    checked.append(avg[-1] if averages else sel[-1])
                     which.append("average" if averages else "select")
             gm = lambda xs: math.exp(np.mean(np.log(xs)))  # noqa: E731
             print(f"| {k} | {len(groups)} | {gm(sel):.4f} | {', '.join(map(str, sizes))} | {gm(avg):.4f} | "
-                  f"{gm(auto):.4f} | {', '.join(which)} |", flush=True)
+                  f"{gm(checked):.4f} | {', '.join(which)} |", flush=True)
             k *= 2
 
 
